@@ -1,0 +1,1 @@
+"""Episode loop, command line, benchmarks and viewers: composes sim, dodt and planner."""

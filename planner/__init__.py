@@ -1,0 +1,1 @@
+"""Static voxel map with dynamic clearing and an MPC planner (closed-loop issue)."""

@@ -1,0 +1,268 @@
+"""Walking people: paths from behaviours, and the DeepMimic humanoid animated from mocap.
+
+A person's path is planned once, at world build, from its behaviour and the seed: a long
+polyline walked at constant speed after the start delay. Position and velocity at any time
+follow from it exactly, which is what ground truth reports. The body is pybullet_data's
+DeepMimic humanoid (``humanoid/humanoid.urdf``, Y-up, 1.62 m at globalScaling 0.25) posed
+kinematically from the walking clip (``data/motions/humanoid3d_walk.txt``: 38 intervals of
+1/30 s per gait cycle, the root advancing 1.2386 m). The gait phase follows the distance
+walked, so the feet do not slide whatever the speed, and the body is scaled to the person's
+height (stride scales with it).
+"""
+from __future__ import annotations
+
+import bisect
+import json
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from sim.scenario import PERSON_HEIGHT_RANGE, PERSON_RADIUS, Person, Scenario, circle_waypoints
+
+HUMANOID_URDF = "humanoid/humanoid.urdf"
+WALK_CLIP = "data/motions/humanoid3d_walk.txt"
+HUMANOID_BASE_SCALE = 0.25  # globalScaling that gives the nominal height
+HUMANOID_NOMINAL_HEIGHT = 1.62  # m at HUMANOID_BASE_SCALE (foot sole to head top)
+
+# Clip column layout after [duration, root position (3), root quaternion (4)]:
+# (urdf joint index, first column, number of values); quaternions are (w, x, y, z).
+_CLIP_JOINTS = (
+    (1, 8, 4),  # chest
+    (2, 12, 4),  # neck
+    (9, 16, 4),  # right hip
+    (10, 20, 1),  # right knee
+    (11, 21, 4),  # right ankle
+    (3, 25, 4),  # right shoulder
+    (4, 29, 1),  # right elbow
+    (12, 30, 4),  # left hip
+    (13, 34, 1),  # left knee
+    (14, 35, 4),  # left ankle
+    (6, 39, 4),  # left shoulder
+    (7, 43, 1),  # left elbow
+)
+_SPHERICAL = [j for j, _, n in _CLIP_JOINTS if n == 4]
+_REVOLUTE = [j for j, _, n in _CLIP_JOINTS if n == 1]
+_Q_X90 = np.array([math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)])  # (x, y, z, w)
+
+
+# --------------------------------------------------------------------------- quaternions (x, y, z, w)
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz])
+
+
+def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
+    """Normalised linear interpolation of rows of quaternions, taking the short way."""
+    sign = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    q = (1 - w) * a + w * sign * b
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+# --------------------------------------------------------------------------- the clip
+
+
+@dataclass(frozen=True)
+class WalkClip:
+    sph: np.ndarray  # (F, 8, 4) spherical joint quaternions (x, y, z, w)
+    rev: np.ndarray  # (F, 4) revolute joint angles
+    root_offset: np.ndarray  # (F, 3) root position minus its linear progression, clip frame
+    root_quat: np.ndarray  # (F, 4) root orientation (x, y, z, w), clip frame (Y up)
+    stride: float  # m the root advances per cycle at nominal height
+
+    @property
+    def n_intervals(self) -> int:
+        return self.sph.shape[0] - 1
+
+
+@lru_cache(maxsize=1)
+def load_walk_clip() -> WalkClip:
+    import pybullet_data
+
+    data = json.loads((Path(pybullet_data.getDataPath()) / WALK_CLIP).read_text())
+    f = np.asarray(data["Frames"], dtype=float)
+    n = f.shape[0] - 1  # the last frame closes the loop (same pose, one stride on)
+    stride = f[n, 1] - f[0, 1]
+    phase = np.arange(f.shape[0]) / n
+    root = f[:, 1:4].copy()
+    root[:, 0] -= phase * stride
+    wxyz_to_xyzw = [1, 2, 3, 0]
+    sph = np.stack([f[:, c:c + 4][:, wxyz_to_xyzw] for _, c, k in _CLIP_JOINTS if k == 4], axis=1)
+    rev = np.stack([f[:, c] for _, c, k in _CLIP_JOINTS if k == 1], axis=1)
+    return WalkClip(sph=sph, rev=rev, root_offset=root, root_quat=f[:, 4:8][:, wxyz_to_xyzw], stride=stride)
+
+
+# --------------------------------------------------------------------------- paths
+
+
+class WalkPath:
+    """A polyline walked at constant speed from ``start_delay`` on; standing at its end."""
+
+    def __init__(self, points: np.ndarray, speed: float, start_delay: float):
+        self.points = np.asarray(points, dtype=float)
+        self.speed = float(speed)
+        self.start_delay = float(start_delay)
+        seg = np.diff(self.points, axis=0)
+        seg_len = np.linalg.norm(seg, axis=1)
+        self._cum = [0.0] + np.cumsum(seg_len).tolist()
+        self._xy = self.points.tolist()
+        self._dir = (seg / np.maximum(seg_len, 1e-12)[:, None]).tolist()
+
+    @property
+    def length(self) -> float:
+        return self._cum[-1]
+
+    def distance(self, t: float) -> float:
+        """Arc length walked by time t."""
+        return min(max(t - self.start_delay, 0.0) * self.speed, self.length)
+
+    def _segment(self, s: float) -> int:
+        return min(max(bisect.bisect_right(self._cum, s) - 1, 0), len(self._cum) - 2)
+
+    def point_at(self, s: float) -> np.ndarray:
+        s = min(max(s, 0.0), self.length)
+        i = self._segment(s)
+        a, d = self._xy[i], self._dir[i]
+        r = s - self._cum[i]
+        return np.array([a[0] + r * d[0], a[1] + r * d[1]])
+
+    def position(self, t: float) -> np.ndarray:
+        return self.point_at(self.distance(t))
+
+    def trail_point(self, s: float) -> np.ndarray:
+        """Like point_at, but before the start it extends the first segment backwards."""
+        if s >= 0:
+            return self.point_at(s)
+        a, d = self._xy[0], self._dir[0]
+        return np.array([a[0] + s * d[0], a[1] + s * d[1]])
+
+    def velocity(self, t: float) -> np.ndarray:
+        s = (t - self.start_delay) * self.speed
+        if t < self.start_delay or s >= self.length:
+            return np.zeros(2)
+        d = self._dir[self._segment(s)]
+        return np.array([self.speed * d[0], self.speed * d[1]])
+
+    def heading(self, t: float, window: float = 0.3) -> float:
+        """Body heading: direction of the path around the current point, smoothed over
+        +-window metres so that corners are turned, not snapped."""
+        s = self.distance(t)
+        a, b = self.point_at(s - window), self.point_at(s + window)
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        if dx * dx + dy * dy < 1e-12:
+            d = self._dir[0]
+            dx, dy = d[0], d[1]
+        return math.atan2(dy, dx)
+
+
+def _segment_clear(a, b, scenario: Scenario, margin: float) -> bool:
+    n = max(2, int(np.linalg.norm(b - a) / 0.05) + 1)
+    pts = a + np.linspace(0, 1, n)[:, None] * (b - a)
+    return not any(np.any(o.footprint_contains(pts, margin)) for o in scenario.obstacles)
+
+
+def plan_path(person: Person, scenario: Scenario, rng: np.random.Generator, horizon: float) -> WalkPath:
+    """Expand a behaviour into the polyline walked over ``horizon`` seconds."""
+    need = person.speed * max(horizon - person.start_delay, 0.0) + 1.0
+    if person.behaviour in ("waypoint_loop", "circle"):
+        loop = np.array(person.waypoints if person.behaviour == "waypoint_loop"
+                        else circle_waypoints(person.center, person.radius, person.clockwise))
+        closed = np.vstack([loop, loop[:1]])
+        per = np.sum(np.linalg.norm(np.diff(closed, axis=0), axis=1))
+        reps = int(math.ceil(need / per)) + 1
+        pts = np.vstack([loop] * reps + [loop[:1]])
+    elif person.behaviour == "back_and_forth":
+        wp = np.array(person.waypoints)
+        length = np.sum(np.linalg.norm(np.diff(wp, axis=0), axis=1))
+        reps = int(math.ceil(need / (2 * length))) + 1
+        pts = np.vstack([wp] + [np.vstack([wp[-2::-1], wp[1:]])] * reps)
+    elif person.behaviour == "crossing":
+        pts = np.array(person.waypoints)
+    else:  # random_walk
+        x0, y0, x1, y1 = person.region
+        lo, hi = np.array([x0, y0]), np.array([x1, y1])
+
+        def sample():
+            for _ in range(1000):
+                q = lo + rng.random(2) * (hi - lo)
+                if not any(o.footprint_contains(q, PERSON_RADIUS)[0] for o in scenario.obstacles):
+                    return q
+            raise ValueError(f"{scenario.source}: people: no free point in the random-walk region {list(person.region)}")
+
+        cur = np.array(person.start) if person.start is not None else sample()
+        pts_list, total = [cur], 0.0
+        min_leg = min(1.0, 0.5 * float(np.linalg.norm(hi - lo)))
+        while total < need:
+            for _ in range(200):
+                goal = sample()
+                if np.linalg.norm(goal - cur) >= min_leg and _segment_clear(cur, goal, scenario, PERSON_RADIUS):
+                    break
+            else:
+                break  # boxed in: the person stops here
+            total += float(np.linalg.norm(goal - cur))
+            pts_list.append(goal)
+            cur = goal
+        pts = np.array(pts_list) if len(pts_list) > 1 else np.array([cur, cur + 1e-3])
+    return WalkPath(points=pts.astype(float), speed=person.speed, start_delay=person.start_delay)
+
+
+def person_height(person: Person, rng: np.random.Generator) -> float:
+    if person.height is not None:
+        return person.height
+    return float(rng.uniform(*PERSON_HEIGHT_RANGE))
+
+
+# --------------------------------------------------------------------------- the animated body
+
+
+class Walker:
+    """One person: a path, a height, and humanoid bodies in one or more PyBullet clients."""
+
+    def __init__(self, path: WalkPath, height: float):
+        self.path = path
+        self.height = height
+        self.k = height / HUMANOID_NOMINAL_HEIGHT
+        self.clip = load_walk_clip()
+        self.bodies: list[tuple[int, int]] = []  # (client, body id)
+
+    @property
+    def global_scaling(self) -> float:
+        return HUMANOID_BASE_SCALE * self.k
+
+    def pose(self, t: float):
+        """(base position, base quaternion, spherical joint quats (8, 4), revolute angles (4,))."""
+        c = self.clip
+        s = self.path.distance(t)
+        phase = (s / (c.stride * self.k)) % 1.0 * c.n_intervals
+        i = int(phase)
+        w = phase - i
+        sph = _nlerp(c.sph[i], c.sph[i + 1], w)
+        rev = (1 - w) * c.rev[i] + w * c.rev[i + 1]
+        off = (1 - w) * c.root_offset[i] + w * c.root_offset[i + 1]
+        rq = _nlerp(c.root_quat[i], c.root_quat[i + 1], w)
+        yaw = self.path.heading(t)
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        # Clip frame (x forward, y up, z right-ish) -> world after the +90 deg roll: (x, -z, y).
+        lx, ly = off[0] * self.k, -off[2] * self.k
+        xy = self.path.point_at(s)
+        pos = [xy[0] + cy * lx - sy * ly, xy[1] + sy * lx + cy * ly, off[1] * self.k]
+        q_yaw = np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
+        quat = _qmul(q_yaw, _qmul(_Q_X90, rq))
+        return pos, quat, sph, rev
+
+    def apply(self, p, t: float) -> None:
+        pos, quat, sph, rev = self.pose(t)
+        quat = quat.tolist()
+        targets = [q.tolist() for q in sph] + [[a] for a in rev.tolist()]
+        joints = _SPHERICAL + _REVOLUTE
+        for client, body in self.bodies:
+            p.resetBasePositionAndOrientation(body, pos, quat, physicsClientId=client)
+            p.resetJointStatesMultiDof(body, joints, targets, physicsClientId=client)

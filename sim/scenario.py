@@ -1,0 +1,591 @@
+"""Declarative scenarios: TOML files validated on load into frozen dataclasses.
+
+Every user mistake (unknown key, wrong type, value out of range, a person walking out
+of the corridor or starting inside an obstacle) raises ``ScenarioError`` with one
+message that names the file, the key and the reason. The format is documented in the
+README ("Scenario format").
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+OBSTACLE_KINDS = ("box", "pillar", "shelf", "wall")
+BEHAVIOURS = ("waypoint_loop", "back_and_forth", "crossing", "random_walk", "circle")
+PERSON_SPEED_RANGE = (0.5, 1.6)  # m/s, the issue's walking-speed band
+PERSON_HEIGHT_RANGE = (1.6, 1.85)  # m
+PERSON_RADIUS = 0.25  # m, footprint half-width used for the corridor and obstacle checks
+
+
+class ScenarioError(ValueError):
+    """A scenario file is wrong: the message names the file, the key and the reason."""
+
+
+# --------------------------------------------------------------------------- dataclasses
+
+
+@dataclass(frozen=True)
+class Corridor:
+    length: float = 15.0  # m, along world x, from x = 0
+    width: float = 4.0  # m, along world y, centred on y = 0
+    height: float = 3.0  # m, wall height
+    ceiling: bool = False
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static obstacle standing on the floor.
+
+    box / shelf / wall: ``size`` = (length along its x, depth along its y, height), rotated by
+    ``yaw`` about its centre. pillar: a cylinder, ``size`` = (diameter, diameter, height).
+    """
+
+    kind: str
+    center: tuple[float, float]
+    size: tuple[float, float, float]
+    yaw: float = 0.0  # rad
+    color: tuple[float, float, float] | None = None
+
+    def footprint_contains(self, xy: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Boolean mask of the (N, 2) points inside the footprint grown by ``margin``."""
+        d = np.atleast_2d(np.asarray(xy, dtype=float)) - np.asarray(self.center)
+        if self.kind == "pillar":
+            return np.hypot(d[:, 0], d[:, 1]) <= self.size[0] / 2 + margin
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        lx = c * d[:, 0] + s * d[:, 1]
+        ly = -s * d[:, 0] + c * d[:, 1]
+        return (np.abs(lx) <= self.size[0] / 2 + margin) & (np.abs(ly) <= self.size[1] / 2 + margin)
+
+    def aabb(self) -> tuple[np.ndarray, np.ndarray]:
+        """World axis-aligned box (min, max) of the obstacle."""
+        if self.kind == "pillar":
+            hx = hy = self.size[0] / 2
+        else:
+            c, s = abs(math.cos(self.yaw)), abs(math.sin(self.yaw))
+            hx = c * self.size[0] / 2 + s * self.size[1] / 2
+            hy = s * self.size[0] / 2 + c * self.size[1] / 2
+        lo = np.array([self.center[0] - hx, self.center[1] - hy, 0.0])
+        hi = np.array([self.center[0] + hx, self.center[1] + hy, self.size[2]])
+        return lo, hi
+
+
+@dataclass(frozen=True)
+class Person:
+    behaviour: str
+    speed: float  # m/s
+    height: float | None = None  # m; None -> drawn from the seed in PERSON_HEIGHT_RANGE
+    start_delay: float = 0.0  # s standing before walking
+    waypoints: tuple[tuple[float, float], ...] = ()
+    region: tuple[float, float, float, float] | None = None  # x_min, y_min, x_max, y_max
+    start: tuple[float, float] | None = None  # random_walk start (None -> drawn in region)
+    center: tuple[float, float] | None = None  # circle
+    radius: float | None = None  # circle
+    clockwise: bool = False  # circle
+    color: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Drone:
+    start: tuple[float, float, float] = (0.5, 0.0, 1.2)
+    goal: tuple[float, float, float] = (14.5, 0.0, 1.2)
+    yaw: float = 0.0  # rad, initial heading
+    cruise_speed: float = 1.0  # m/s along the straight demo reference
+
+
+@dataclass(frozen=True)
+class Camera:
+    """RealSense D435i depth stream as configured by the DODT authors (see dodt.frames)."""
+
+    width: int = 640
+    height: int = 480
+    fx: float = 387.1537
+    fy: float = 387.1537
+    cx: float = 321.3246
+    cy: float = 233.5472
+    min_range: float = 0.2  # m; D435 minimum Z is about 0.11-0.2 m depending on resolution
+    max_range: float = 10.0  # m
+    # Body (FLU) -> camera optical frame offset: the reference code's D435i extrinsic
+    # t = (0.065, 0.01, 0.12) m; rpy is the extra mount rotation (roll, pitch, yaw) [rad].
+    mount_xyz: tuple[float, float, float] = (0.065, 0.01, 0.12)
+    mount_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    color: bool = True
+    renderer: str = "auto"  # auto | egl | tiny
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Depth noise (sim.depth_noise) and odometry noise; ``enabled = false`` is exact."""
+
+    enabled: bool = True
+    axial_model: str = "intel_rms"  # intel_rms | nguyen | none
+    baseline: float = 0.050  # m, D435 stereo baseline
+    subpixel: float = 0.08  # px RMS disparity error (Intel: < 0.1 typical)
+    edge_threshold: float = 0.05  # relative depth jump that marks a depth edge
+    edge_hole_prob: float = 0.4  # edge pixel -> invalid (0)
+    flying_pixel_prob: float = 0.3  # edge pixel -> mixed depth between the two surfaces
+    dropout: float = 0.005  # fraction of valid pixels randomly invalid
+    odom_position_std: float = 0.0  # m, per-frame odometry position noise
+    odom_rotation_std: float = 0.0  # rad, per-frame odometry rotation noise
+
+
+@dataclass(frozen=True)
+class Rates:
+    physics: int = 240  # Hz
+    control: int = 120  # Hz
+    camera: int = 30  # Hz
+
+
+@dataclass(frozen=True)
+class CameraPath:
+    """A scripted camera path (perception scenarios): no planner needed.
+
+    mode = "carried": the body is moved kinematically along the path, level (hand-held).
+    mode = "flown": the controller flies the path, so the image tilts with the body.
+    Either ``keyframes`` [[t, x, y, z, yaw_deg], ...] interpolated linearly, or
+    ``follow_person`` (index) walking ``follow_distance`` behind that person's trail.
+    """
+
+    mode: str = "carried"
+    keyframes: tuple[tuple[float, float, float, float, float], ...] = ()
+    follow_person: int | None = None
+    follow_distance: float = 2.5
+    follow_height: float = 1.3
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    source: str  # file the scenario came from
+    seed: int = 0
+    duration: float = 20.0  # s
+    description: str = ""
+    corridor: Corridor = field(default_factory=Corridor)
+    obstacles: tuple[Obstacle, ...] = ()
+    people: tuple[Person, ...] = ()
+    drone: Drone = field(default_factory=Drone)
+    camera: Camera = field(default_factory=Camera)
+    noise: Noise = field(default_factory=Noise)
+    rates: Rates = field(default_factory=Rates)
+    camera_path: CameraPath | None = None
+    segmentation: bool = True  # render the ground-truth segmentation image every frame
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class _Section:
+    """Reads one TOML table, remembering which keys were used, naming errors by path."""
+
+    def __init__(self, data: Any, path: str, source: str):
+        self.source = source
+        self.path = path
+        if not isinstance(data, dict):
+            self.fail(path, f"expected a table, got {type(data).__name__}")
+        self.data = data
+        self.used: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def fail(self, key: str, reason: str):
+        raise ScenarioError(f"{self.source}: {key or '<top level>'}: {reason}")
+
+    def has(self, name: str) -> bool:
+        return name in self.data
+
+    def raw(self, name: str, default: Any = None) -> Any:
+        self.used.add(name)
+        return self.data.get(name, default)
+
+    def number(self, name, default=None, lo=None, hi=None, lo_open=False, integer=False):
+        if name not in self.data:
+            if default is None:
+                self.fail(self.key(name), "is required")
+            self.used.add(name)
+            return default
+        v = self.raw(name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(self.key(name), f"expected a number, got {v!r}")
+        if integer and not isinstance(v, int):
+            self.fail(self.key(name), f"expected an integer, got {v!r}")
+        if not math.isfinite(v):
+            self.fail(self.key(name), f"must be finite, got {v!r}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            self.fail(self.key(name), f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
+        if hi is not None and v > hi:
+            self.fail(self.key(name), f"must be <= {hi}, got {v!r}")
+        return int(v) if integer else float(v)
+
+    def boolean(self, name, default):
+        v = self.raw(name, default)
+        if not isinstance(v, bool):
+            self.fail(self.key(name), f"expected true or false, got {v!r}")
+        return v
+
+    def string(self, name, default=None, choices=None):
+        v = self.raw(name, default)
+        if v is None:
+            self.fail(self.key(name), "is required")
+        if not isinstance(v, str):
+            self.fail(self.key(name), f"expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            self.fail(self.key(name), f"must be one of {', '.join(choices)}; got {v!r}")
+        return v
+
+    def vector(self, name, n, default=None, required=False):
+        if name not in self.data:
+            if required:
+                self.fail(self.key(name), "is required")
+            self.used.add(name)
+            return default
+        v = self.raw(name)
+        if not isinstance(v, list) or len(v) != n:
+            self.fail(self.key(name), f"expected a list of {n} numbers, got {v!r}")
+        out = []
+        for x in v:
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                self.fail(self.key(name), f"expected a list of {n} finite numbers, got {v!r}")
+            out.append(float(x))
+        return tuple(out)
+
+    def points(self, name, n, min_count=1, names=("x", "y")):
+        v = self.raw(name, [])
+        if not isinstance(v, list) or len(v) < min_count:
+            self.fail(self.key(name), f"expected a list of at least {min_count} points [{', '.join(names)}]")
+        out = []
+        for i, p in enumerate(v):
+            if (not isinstance(p, list) or len(p) != n
+                    or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in p)):
+                self.fail(f"{self.key(name)}[{i}]", f"expected {n} finite numbers, got {p!r}")
+            out.append(tuple(float(x) for x in p))
+        return tuple(out)
+
+    def color(self, name):
+        c = self.vector(name, 3)
+        if c is not None and any(not 0.0 <= x <= 1.0 for x in c):
+            self.fail(self.key(name), f"color components must lie in [0, 1], got {list(c)}")
+        return c
+
+    def sub(self, name) -> "_Section":
+        self.used.add(name)
+        return _Section(self.data.get(name, {}), self.key(name), self.source)
+
+    def done(self):
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            self.fail(self.key(unknown[0]), "unknown key" + (f" (also unknown: {', '.join(unknown[1:])})" if len(unknown) > 1 else ""))
+
+
+def scenario_path(name_or_path: str | Path) -> Path:
+    """A path as given, or the name of a shipped scenario (``corridor`` or ``corridor.toml``)."""
+    p = Path(name_or_path)
+    if p.exists():
+        return p
+    shipped = SCENARIO_DIR / (p.name if p.suffix == ".toml" else p.name + ".toml")
+    if p.parent == Path(".") and shipped.exists():
+        return shipped
+    names = ", ".join(sorted(s.stem for s in SCENARIO_DIR.glob("*.toml")))
+    raise ScenarioError(f"{name_or_path}: no such file, and not a shipped scenario (shipped: {names})")
+
+
+def shipped_scenarios() -> list[str]:
+    return sorted(s.stem for s in SCENARIO_DIR.glob("*.toml"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Read and validate a scenario file (or a shipped scenario by name)."""
+    path = scenario_path(name_or_path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
+    return parse_scenario(text, source=str(path))
+
+
+def parse_scenario(text: str, source: str = "<string>") -> Scenario:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{source}: not valid TOML: {e}") from None
+    top = _Section(data, "", source)
+    name = top.string("name", Path(source).stem)
+    seed = top.number("seed", 0, lo=0, integer=True)
+    duration = top.number("duration", 20.0, lo=0.0, lo_open=True, hi=3600.0)
+    description = top.string("description", "")
+    segmentation = top.boolean("segmentation", True)
+
+    corridor = _read_corridor(top.sub("corridor"))
+    obstacles = tuple(_read_obstacle(s) for s in _array_of_tables(top, "obstacles"))
+    people = tuple(_read_person(s) for s in _array_of_tables(top, "people"))
+    drone = _read_drone(top.sub("drone"))
+    camera = _read_camera(top.sub("camera"))
+    noise = _read_noise(top.sub("noise"))
+    rates = _read_rates(top.sub("rates"))
+    camera_path = _read_camera_path(top.sub("camera_path")) if top.has("camera_path") else None
+    top.done()
+
+    sc = Scenario(name=name, source=source, seed=seed, duration=duration, description=description,
+                  corridor=corridor, obstacles=obstacles, people=people, drone=drone, camera=camera,
+                  noise=noise, rates=rates, camera_path=camera_path, segmentation=segmentation)
+    _check_geometry(sc, top)
+    return sc
+
+
+def _array_of_tables(top: _Section, name: str) -> list[_Section]:
+    v = top.raw(name, [])
+    if not isinstance(v, list):
+        top.fail(name, "expected an array of tables ([[%s]])" % name)
+    return [_Section(item, f"{name}[{i}]", top.source) for i, item in enumerate(v)]
+
+
+def _read_corridor(s: _Section) -> Corridor:
+    c = Corridor(length=s.number("length", 15.0, lo=2.0, hi=200.0),
+                 width=s.number("width", 4.0, lo=1.0, hi=50.0),
+                 height=s.number("height", 3.0, lo=1.0, hi=20.0),
+                 ceiling=s.boolean("ceiling", False))
+    s.done()
+    return c
+
+
+def _read_obstacle(s: _Section) -> Obstacle:
+    kind = s.string("kind", choices=OBSTACLE_KINDS)
+    center = s.vector("center", 2, required=True)
+    if kind == "pillar":
+        r = s.number("radius", lo=0.02, hi=5.0)
+        h = s.number("height", lo=0.05, hi=20.0)
+        size = (2 * r, 2 * r, h)
+    else:
+        size = s.vector("size", 3, required=True)
+        if any(x <= 0 for x in size):
+            s.fail(s.key("size"), f"every dimension must be > 0, got {list(size)}")
+    yaw = math.radians(s.number("yaw_deg", 0.0, lo=-360.0, hi=360.0))
+    o = Obstacle(kind=kind, center=center, size=size, yaw=yaw, color=s.color("color"))
+    s.done()
+    return o
+
+
+def _read_person(s: _Section) -> Person:
+    b = s.string("behaviour", choices=BEHAVIOURS)
+    speed = s.number("speed", lo=PERSON_SPEED_RANGE[0], hi=PERSON_SPEED_RANGE[1])
+    height = s.number("height", 0.0) if s.has("height") else None
+    if height is not None and not PERSON_HEIGHT_RANGE[0] <= height <= PERSON_HEIGHT_RANGE[1]:
+        s.fail(s.key("height"), f"must lie in [{PERSON_HEIGHT_RANGE[0]}, {PERSON_HEIGHT_RANGE[1]}] m, got {height}")
+    kw: dict[str, Any] = dict(behaviour=b, speed=speed, height=height,
+                              start_delay=s.number("start_delay", 0.0, lo=0.0, hi=3600.0),
+                              color=s.color("color"))
+    if b in ("waypoint_loop", "back_and_forth", "crossing"):
+        kw["waypoints"] = s.points("waypoints", 2, min_count=2)
+        for i in range(len(kw["waypoints"]) - 1):
+            if math.dist(kw["waypoints"][i], kw["waypoints"][i + 1]) < 1e-6:
+                s.fail(f"{s.key('waypoints')}[{i + 1}]", "repeats the previous waypoint")
+    elif b == "random_walk":
+        region = s.vector("region", 4, required=True)
+        if region[2] - region[0] < 0.1 or region[3] - region[1] < 0.1:
+            s.fail(s.key("region"), f"expected [x_min, y_min, x_max, y_max] with max > min, got {list(region)}")
+        kw["region"] = region
+        kw["start"] = s.vector("start", 2)
+    elif b == "circle":
+        kw["center"] = s.vector("center", 2, required=True)
+        kw["radius"] = s.number("radius", lo=0.3, hi=20.0)
+        kw["clockwise"] = s.boolean("clockwise", False)
+    s.done()
+    return Person(**kw)
+
+
+def _read_drone(s: _Section) -> Drone:
+    d = Drone(start=s.vector("start", 3, Drone.start), goal=s.vector("goal", 3, Drone.goal),
+              yaw=math.radians(s.number("yaw_deg", 0.0, lo=-360.0, hi=360.0)),
+              cruise_speed=s.number("cruise_speed", 1.0, lo=0.0, lo_open=True, hi=5.0))
+    s.done()
+    return d
+
+
+def _read_camera(s: _Section) -> Camera:
+    w = s.number("width", 640, lo=16, hi=4096, integer=True)
+    h = s.number("height", 480, lo=16, hi=4096, integer=True)
+    c = Camera(width=w, height=h,
+               fx=s.number("fx", Camera.fx, lo=1.0, hi=1e5), fy=s.number("fy", Camera.fy, lo=1.0, hi=1e5),
+               cx=s.number("cx", Camera.cx * w / 640, lo=0.0, hi=float(w)),
+               cy=s.number("cy", Camera.cy * h / 480, lo=0.0, hi=float(h)),
+               min_range=s.number("min_range", Camera.min_range, lo=0.15, hi=5.0),  # >= the near plane
+               max_range=s.number("max_range", Camera.max_range, lo=0.5, hi=100.0),
+               mount_xyz=s.vector("mount_xyz", 3, Camera.mount_xyz),
+               mount_rpy=tuple(math.radians(a) for a in s.vector("mount_rpy_deg", 3, (0.0, 0.0, 0.0))),
+               color=s.boolean("color", True),
+               renderer=s.string("renderer", "auto", choices=("auto", "egl", "tiny")))
+    if c.max_range <= c.min_range:
+        s.fail(s.key("max_range"), f"must exceed min_range ({c.min_range}), got {c.max_range}")
+    s.done()
+    return c
+
+
+def _read_noise(s: _Section) -> Noise:
+    n = Noise(enabled=s.boolean("enabled", True),
+              axial_model=s.string("axial_model", Noise.axial_model, choices=("intel_rms", "nguyen", "none")),
+              baseline=s.number("baseline", Noise.baseline, lo=0.0, lo_open=True, hi=1.0),
+              subpixel=s.number("subpixel", Noise.subpixel, lo=0.0, hi=2.0),
+              edge_threshold=s.number("edge_threshold", Noise.edge_threshold, lo=0.0, lo_open=True, hi=10.0),
+              edge_hole_prob=s.number("edge_hole_prob", Noise.edge_hole_prob, lo=0.0, hi=1.0),
+              flying_pixel_prob=s.number("flying_pixel_prob", Noise.flying_pixel_prob, lo=0.0, hi=1.0),
+              dropout=s.number("dropout", Noise.dropout, lo=0.0, hi=1.0),
+              odom_position_std=s.number("odom_position_std", 0.0, lo=0.0, hi=1.0),
+              odom_rotation_std=s.number("odom_rotation_std", 0.0, lo=0.0, hi=0.5))
+    if n.edge_hole_prob + n.flying_pixel_prob > 1.0:
+        s.fail(s.key("flying_pixel_prob"), "edge_hole_prob + flying_pixel_prob must not exceed 1")
+    s.done()
+    return n
+
+
+def _read_rates(s: _Section) -> Rates:
+    r = Rates(physics=s.number("physics", 240, lo=60, hi=2000, integer=True),
+              control=s.number("control", 120, lo=100, hi=2000, integer=True),
+              camera=s.number("camera", 30, lo=1, hi=120, integer=True))
+    if r.physics % r.control:
+        s.fail(s.key("control"), f"physics rate {r.physics} Hz must be a multiple of the control rate {r.control} Hz")
+    if r.control % r.camera:
+        s.fail(s.key("camera"), f"control rate {r.control} Hz must be a multiple of the camera rate {r.camera} Hz "
+               "(frames are captured at control-period boundaries)")
+    s.done()
+    return r
+
+
+def _read_camera_path(s: _Section) -> CameraPath:
+    mode = s.string("mode", "carried", choices=("carried", "flown"))
+    has_kf, has_follow = s.has("keyframes"), s.has("follow_person")
+    if has_kf == has_follow:
+        s.fail(s.path, "give exactly one of keyframes or follow_person")
+    kw: dict[str, Any] = dict(mode=mode)
+    if has_kf:
+        kf = s.points("keyframes", 5, min_count=1, names=("t", "x", "y", "z", "yaw_deg"))
+        for i in range(1, len(kf)):
+            if kf[i][0] <= kf[i - 1][0]:
+                s.fail(f"{s.key('keyframes')}[{i}]", "times must increase")
+        kw["keyframes"] = tuple((t, x, y, z, math.radians(yaw)) for t, x, y, z, yaw in kf)
+    else:
+        kw["follow_person"] = s.number("follow_person", lo=0, integer=True)
+        kw["follow_distance"] = s.number("follow_distance", 2.5, lo=0.5, hi=10.0)
+        kw["follow_height"] = s.number("follow_height", 1.3, lo=0.3, hi=5.0)
+    cp = CameraPath(**kw)
+    s.done()
+    return cp
+
+
+# --------------------------------------------------------------------------- geometry checks
+
+
+def _inside_corridor(c: Corridor, xy: np.ndarray, margin: float) -> np.ndarray:
+    xy = np.atleast_2d(xy)
+    return ((xy[:, 0] >= margin) & (xy[:, 0] <= c.length - margin)
+            & (np.abs(xy[:, 1]) <= c.width / 2 - margin))
+
+
+def _sample_segments(points: np.ndarray, closed: bool, step: float = 0.05) -> np.ndarray:
+    pts = np.asarray(points, dtype=float)
+    if closed:
+        pts = np.vstack([pts, pts[:1]])
+    out = [pts[:1]]
+    for a, b in zip(pts[:-1], pts[1:]):
+        n = max(2, int(math.ceil(np.linalg.norm(b - a) / step)) + 1)
+        out.append(a + np.linspace(0, 1, n)[1:, None] * (b - a))
+    return np.vstack(out)
+
+
+def circle_waypoints(center, radius, clockwise=False, n=24) -> tuple[tuple[float, float], ...]:
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False) * (-1 if clockwise else 1)
+    return tuple((center[0] + radius * math.cos(t), center[1] + radius * math.sin(t)) for t in a)
+
+
+def _check_geometry(sc: Scenario, top: _Section) -> None:
+    c = sc.corridor
+    for i, o in enumerate(sc.obstacles):
+        lo, hi = o.aabb()
+        if lo[0] < 0 or hi[0] > c.length or lo[1] < -c.width / 2 or hi[1] > c.width / 2:
+            top.fail(f"obstacles[{i}].center", f"the {o.kind} at {list(o.center)} sticks out of the corridor")
+        if hi[2] > c.height + 1e-9 and c.ceiling:
+            top.fail(f"obstacles[{i}].size", f"taller than the corridor ({c.height} m)")
+
+    def in_obstacle(xy, margin):
+        for j, o in enumerate(sc.obstacles):
+            if np.any(o.footprint_contains(xy, margin)):
+                return j
+        return None
+
+    for i, p in enumerate(sc.people):
+        key = f"people[{i}]"
+        if p.behaviour == "random_walk":
+            x0, y0, x1, y1 = p.region
+            corners = np.array([[x0, y0], [x1, y1]])
+            if not np.all(_inside_corridor(c, corners, PERSON_RADIUS)):
+                top.fail(f"{key}.region", f"region {list(p.region)} leaves the corridor "
+                         f"(x in [0, {c.length}], |y| <= {c.width / 2}, minus {PERSON_RADIUS} m body radius)")
+            gx, gy = np.meshgrid(np.arange(x0, x1 + 1e-9, 0.1), np.arange(y0, y1 + 1e-9, 0.1))
+            grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
+            free = np.ones(len(grid), bool)
+            for o in sc.obstacles:
+                free &= ~o.footprint_contains(grid, PERSON_RADIUS)
+            if not np.any(free):
+                top.fail(f"{key}.region", f"no free space in the region {list(p.region)}: obstacles cover all of it")
+            if p.start is not None:
+                if not (x0 <= p.start[0] <= x1 and y0 <= p.start[1] <= y1):
+                    top.fail(f"{key}.start", f"start {list(p.start)} is outside the region {list(p.region)}")
+                j = in_obstacle(np.array(p.start), PERSON_RADIUS)
+                if j is not None:
+                    top.fail(f"{key}.start", f"starts inside obstacles[{j}] ({sc.obstacles[j].kind})")
+            continue
+        if p.behaviour == "circle":
+            wps = np.array(circle_waypoints(p.center, p.radius, p.clockwise))
+            path_key = f"{key}.center"
+        else:
+            wps = np.array(p.waypoints)
+            path_key = f"{key}.waypoints"
+        j = in_obstacle(wps[0], PERSON_RADIUS)
+        if j is not None:
+            top.fail(path_key, f"the person starts inside obstacles[{j}] ({sc.obstacles[j].kind})")
+        samples = _sample_segments(wps, closed=p.behaviour in ("waypoint_loop", "circle"))
+        outside = ~_inside_corridor(c, samples, PERSON_RADIUS)
+        if np.any(outside):
+            q = samples[np.argmax(outside)]
+            top.fail(path_key, f"the path leaves the corridor near ({q[0]:.2f}, {q[1]:.2f}) "
+                     f"(x in [0, {c.length}], |y| <= {c.width / 2}, minus {PERSON_RADIUS} m body radius)")
+        for j, o in enumerate(sc.obstacles):
+            hit = o.footprint_contains(samples, PERSON_RADIUS)
+            if np.any(hit):
+                q = samples[np.argmax(hit)]
+                top.fail(path_key, f"the path walks through obstacles[{j}] ({o.kind}) near ({q[0]:.2f}, {q[1]:.2f}) "
+                         f"(the body is {PERSON_RADIUS} m wide each side)")
+
+    for name in ("start", "goal"):
+        pos = getattr(sc.drone, name)
+        if not _inside_corridor(c, np.array(pos[:2]), 0.3)[0] or not 0.2 <= pos[2] <= c.height - 0.2:
+            top.fail(f"drone.{name}", f"{list(pos)} is not inside the corridor with 0.3 m to the walls and 0.2 m to floor and top")
+        j = in_obstacle(np.array(pos[:2]), 0.3)
+        if j is not None and pos[2] <= sc.obstacles[j].size[2] + 0.3:
+            top.fail(f"drone.{name}", f"{list(pos)} is inside obstacles[{j}] ({sc.obstacles[j].kind})")
+
+    cp = sc.camera_path
+    if cp is not None:
+        if cp.follow_person is not None and cp.follow_person >= len(sc.people):
+            top.fail("camera_path.follow_person", f"there is no people[{cp.follow_person}] ({len(sc.people)} people)")
+        for k, (t, x, y, z, _) in enumerate(cp.keyframes):
+            if not _inside_corridor(c, np.array([x, y]), 0.1)[0] or not 0.1 <= z <= c.height:
+                top.fail(f"camera_path.keyframes[{k}]", f"({x}, {y}, {z}) is outside the corridor")
+        if cp.keyframes:
+            pts = np.array([kf[1:4] for kf in cp.keyframes])
+            for k in range(len(pts)):
+                seg = pts[k:k + 2]
+                n = max(2, int(np.linalg.norm(seg[-1] - seg[0]) / 0.05) + 1)
+                samples = seg[0] + np.linspace(0, 1, n)[:, None] * (seg[-1] - seg[0])
+                for j, o in enumerate(sc.obstacles):
+                    lo, hi = o.aabb()
+                    inside = np.all((samples >= lo - 0.1) & (samples <= hi + 0.1), axis=1)
+                    if np.any(inside):
+                        q = samples[np.argmax(inside)]
+                        top.fail(f"camera_path.keyframes[{k}]", f"the camera path passes through obstacles[{j}] "
+                                 f"({o.kind}) near ({q[0]:.2f}, {q[1]:.2f}, {q[2]:.2f})")

@@ -1,0 +1,582 @@
+"""The simulated world: corridor, obstacles, walking people, a quadrotor with an RGB-D camera.
+
+Usage::
+
+    world = World(load_scenario("corridor"), seed=3)
+    while world.time < 5.0:
+        frame = world.step(Reference.hover([1.0, 0.0, 1.2]))  # one control period
+        if frame is not None:
+            truth = world.ground_truth()  # truth of that same frame
+
+Two PyBullet clients are used. The main one steps the physics (240 Hz: the drone's rotor
+forces, contacts with the static world) and renders the camera. People are posed there
+kinematically as massless, non-colliding bodies (so they cost nothing in the solver); a
+second, never-stepped client holds collidable copies of the people and of the drone, and
+answers the drone-person distance and collision queries at every physics step.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet_data
+
+from sim.camera import quiet_stdout
+
+with quiet_stdout():  # PyBullet prints its build time on import
+    import pybullet as p
+
+from dodt.frames import CameraIntrinsics, SensorFrame
+from sim.camera import load_egl, render
+from sim.controller import CascadedController, DroneState, Reference
+from sim.depth_noise import DepthNoiseModel
+from sim.ground_truth import STRUCTURE_ID, CollisionEvent, GroundTruth, ObstacleTruth
+from sim.people import HUMANOID_URDF, Walker, person_height, plan_path
+from sim.scenario import Obstacle, Scenario
+from sim.vehicle import GRAVITY, QUADROTOR_URDF, load_vehicle
+
+_GROUP_DRONE, _GROUP_STATIC = 1, 4
+CLEARANCE_CAP = 1.0  # m: clearances are exact below this, reported as this value above
+_PERSON_REACH = 0.6  # bounding-sphere radius of a person around the root, per metre of height
+
+
+def _rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    return np.array(p.getMatrixFromQuaternion(p.getQuaternionFromEuler([roll, pitch, yaw]))).reshape(3, 3)
+
+
+def _quat_from_matrix(R: np.ndarray) -> list[float]:
+    """Rotation matrix -> PyBullet quaternion (x, y, z, w)."""
+    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
+    x = math.copysign(math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2, R[2, 1] - R[1, 2])
+    y = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2, R[0, 2] - R[2, 0])
+    z = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2, R[1, 0] - R[0, 1])
+    return [x, y, z, w]
+
+
+@dataclass
+class _StaticBody:
+    uid: int
+    obstacle_id: int  # STRUCTURE_ID for floor/walls/ceiling
+    aabb_min: np.ndarray
+    aabb_max: np.ndarray
+
+
+class World:
+    """Build from a scenario and a seed; ``step`` with references; read frames and truth."""
+
+    def __init__(self, scenario: Scenario, seed: int | None = None, renderer: str | None = None,
+                 segmentation: bool | None = None, camera: bool = True):
+        """camera=False skips rendering (frames and truth stay at their initial values); for
+        control and planning experiments that need no images."""
+        self.scenario = scenario
+        self.camera_on = camera
+        self.seed = scenario.seed if seed is None else int(seed)
+        self.requested_renderer = renderer or scenario.camera.renderer
+        self.segmentation_on = scenario.segmentation if segmentation is None else segmentation
+        self.vehicle = load_vehicle()
+        cam = scenario.camera
+        self.intrinsics = CameraIntrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+        R_mount = _rpy_matrix(*cam.mount_rpy)
+        # Body FLU -> optical (x right, y down, z forward) for a forward-looking camera.
+        R_flu_optical = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+        self.T_body_camera = np.eye(4)
+        self.T_body_camera[:3, :3] = R_mount @ R_flu_optical
+        self.T_body_camera[:3, 3] = cam.mount_xyz
+        r = scenario.rates
+        self.dt = 1.0 / r.physics
+        self.steps_per_control = r.physics // r.control
+        self.steps_per_frame = r.physics // r.camera
+        self._client = self._query_client = None
+        self.reset()
+
+    # ------------------------------------------------------------------ building
+
+    def reset(self, seed: int | None = None) -> SensorFrame:
+        """Rebuild the world from scratch (bit-identical for the same scenario and seed)."""
+        if seed is not None:
+            self.seed = int(seed)
+        self.close()
+        ss = np.random.SeedSequence(self.seed)
+        rng_paths, rng_looks, self._rng_noise, self._rng_odom = (np.random.default_rng(s) for s in ss.spawn(4))
+        sc = self.scenario
+
+        with quiet_stdout():
+            self._client = p.connect(p.DIRECT)
+            self._query_client = p.connect(p.DIRECT)
+        c = self._client
+        self.renderer = "tiny"
+        if self.requested_renderer in ("auto", "egl"):
+            if load_egl(p, c):
+                self.renderer = "egl"
+            elif self.requested_renderer == "egl":
+                raise RuntimeError("renderer 'egl' requested but PyBullet's EGL plugin did not load "
+                                   "(is Mesa's libEGL installed?); use renderer = 'auto' or 'tiny'")
+        p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=c)
+        p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=self._query_client)
+        p.setPhysicsEngineParameter(fixedTimeStep=self.dt, numSubSteps=0, deterministicOverlappingPairs=1,
+                                    physicsClientId=c)
+        p.setGravity(0, 0, -GRAVITY, physicsClientId=c)
+
+        self.static_bodies: list[_StaticBody] = []
+        self._build_corridor(rng_looks)
+        for i, o in enumerate(sc.obstacles):
+            self._build_obstacle(o, i + 1, rng_looks)
+        horizon = sc.duration + 5.0
+        self.walkers: list[Walker] = []
+        self.person_ids: list[int] = []
+        for i, person in enumerate(sc.people):
+            w = Walker(plan_path(person, sc, rng_paths, horizon), person_height(person, rng_looks))
+            self._build_person(w, person, rng_looks)
+            self.walkers.append(w)
+            self.person_ids.append(len(sc.obstacles) + 1 + i)
+        self._build_drone()
+
+        # Segmentation: PyBullet body uid -> obstacle id.
+        n = max([b.uid for b in self.static_bodies] + [c for w in self.walkers for _, c in w.bodies[:1]]
+                + [self.drone]) + 2
+        self._seg_lut = np.full(n, -1, dtype=np.int32)
+        for b in self.static_bodies:
+            self._seg_lut[b.uid + 1] = b.obstacle_id
+        for w, oid in zip(self.walkers, self.person_ids):
+            self._seg_lut[w.bodies[0][1] + 1] = oid
+
+        self.controller = CascadedController(self.vehicle)
+        self._noise_model = DepthNoiseModel(sc.noise, sc.camera.fx)
+        self.time = 0.0
+        self.step_count = 0
+        self.collisions: list[CollisionEvent] = []
+        self._in_contact: set[int] = set()
+        self.min_clearance = {"static": CLEARANCE_CAP, "person": CLEARANCE_CAP, "structure": CLEARANCE_CAP}
+        self.clearance_log: list[tuple[float, float, float, float]] = []  # t, static, person, structure
+        self._frame: SensorFrame | None = None
+        self.render_wall_time = 0.0  # s spent inside the renderer (for benchmarks)
+        self._truth: GroundTruth | None = None
+        self._last_reference: Reference | None = None
+        self._camera_path = self._make_camera_path()
+        self._rotor_speed = np.full(4, math.sqrt(self.vehicle.mass * GRAVITY / (4 * self.vehicle.kf)))
+        self._thrust_cmd = np.full(4, self.vehicle.mass * GRAVITY / 4)
+        self._rotor_pos = [r.tolist() for r in self.vehicle.rotor_positions]
+        self._yaw_row = self.vehicle.allocation[3]
+        self._corners = self.vehicle.corners
+        obstacles = [b for b in self.static_bodies if b.obstacle_id != STRUCTURE_ID]
+        self._obstacle_uids = [b.uid for b in obstacles]
+        self._obstacle_lo = np.array([b.aabb_min for b in obstacles]).reshape(-1, 3)
+        self._obstacle_hi = np.array([b.aabb_max for b in obstacles]).reshape(-1, 3)
+        self._person_clearance = CLEARANCE_CAP
+        if self._camera_path is not None:
+            pos, vel, yaw = self._camera_path(0.0)
+            self._set_body_pose(pos, vel, yaw)
+        for w in self.walkers:
+            w.apply(p, 0.0)
+        p.performCollisionDetection(physicsClientId=self._client)
+        self._update_clearance()
+        self._check_contacts()
+        self._capture()
+        return self._frame
+
+    def close(self) -> None:
+        for cid in (self._client, self._query_client):
+            if cid is not None:
+                try:
+                    with quiet_stdout():
+                        p.disconnect(physicsClientId=cid)
+                except p.error:
+                    pass
+        self._client = self._query_client = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    def _add_static(self, shapes, obstacle_id: int, color, base_pos, base_yaw: float = 0.0) -> _StaticBody:
+        """shapes: list of (geom, dims, local offset) -> one static body in the main client."""
+        c = self._client
+        geoms, dims_he, dims_r, dims_l, offsets = [], [], [], [], []
+        for geom, dims, off in shapes:
+            geoms.append(geom)
+            offsets.append(off)
+            if geom == p.GEOM_BOX:
+                dims_he.append(dims)
+                dims_r.append(0.0)
+                dims_l.append(0.0)
+            else:
+                dims_he.append([0, 0, 0])
+                dims_r.append(dims[0])
+                dims_l.append(dims[1])
+        kw = dict(shapeTypes=geoms, halfExtents=dims_he, radii=dims_r, lengths=dims_l,
+                  collisionFramePositions=offsets, physicsClientId=c) if len(shapes) > 1 else None
+        if kw:
+            col = p.createCollisionShapeArray(**kw)
+            vkw = dict(kw)
+            vkw["visualFramePositions"] = vkw.pop("collisionFramePositions")
+            vis = p.createVisualShapeArray(rgbaColors=[list(color) + [1.0]] * len(shapes), **vkw)
+        else:
+            geom, dims, off = shapes[0]
+            if geom == p.GEOM_BOX:
+                col = p.createCollisionShape(geom, halfExtents=dims, collisionFramePosition=off, physicsClientId=c)
+                vis = p.createVisualShape(geom, halfExtents=dims, visualFramePosition=off,
+                                          rgbaColor=list(color) + [1.0], physicsClientId=c)
+            else:
+                col = p.createCollisionShape(geom, radius=dims[0], height=dims[1], collisionFramePosition=off,
+                                             physicsClientId=c)
+                vis = p.createVisualShape(geom, radius=dims[0], length=dims[1], visualFramePosition=off,
+                                          rgbaColor=list(color) + [1.0], physicsClientId=c)
+        uid = p.createMultiBody(0, col, vis, basePosition=base_pos,
+                                baseOrientation=p.getQuaternionFromEuler([0, 0, base_yaw]), physicsClientId=c)
+        p.setCollisionFilterGroupMask(uid, -1, _GROUP_STATIC, _GROUP_DRONE, physicsClientId=c)
+        lo, hi = p.getAABB(uid, physicsClientId=c)
+        body = _StaticBody(uid, obstacle_id, np.array(lo), np.array(hi))
+        self.static_bodies.append(body)
+        return body
+
+    def _build_corridor(self, rng) -> None:
+        co = self.scenario.corridor
+        L, W, H, t = co.length, co.width, co.height, 0.1
+        floor = (0.55, 0.55, 0.55)
+        wall = tuple(np.clip(np.array([0.85, 0.82, 0.75]) + rng.uniform(-0.05, 0.05, 3), 0, 1))
+        box = p.GEOM_BOX
+        self._add_static([(box, [L / 2 + t, W / 2 + t, t / 2], [0, 0, 0])], STRUCTURE_ID, floor, [L / 2, 0, -t / 2])
+        for side in (-1, 1):
+            self._add_static([(box, [L / 2 + t, t / 2, H / 2], [0, 0, 0])], STRUCTURE_ID, wall,
+                             [L / 2, side * (W / 2 + t / 2), H / 2])
+        for x in (-t / 2, L + t / 2):
+            self._add_static([(box, [t / 2, W / 2, H / 2], [0, 0, 0])], STRUCTURE_ID, wall, [x, 0, H / 2])
+        if co.ceiling:
+            self._add_static([(box, [L / 2 + t, W / 2 + t, t / 2], [0, 0, 0])], STRUCTURE_ID, floor,
+                             [L / 2, 0, H + t / 2])
+
+    def _build_obstacle(self, o: Obstacle, oid: int, rng) -> None:
+        color = o.color if o.color is not None else tuple(rng.uniform(0.15, 0.9, 3))
+        sx, sy, sz = o.size
+        base = [o.center[0], o.center[1], 0.0]
+        if o.kind == "pillar":
+            shapes = [(p.GEOM_CYLINDER, [sx / 2, sz], [0, 0, sz / 2])]
+        elif o.kind == "shelf":
+            post, board = 0.03, 0.025
+            shapes = [(p.GEOM_BOX, [post, post, sz / 2], [dx * (sx / 2 - post), dy * (sy / 2 - post), sz / 2])
+                      for dx in (-1, 1) for dy in (-1, 1)]
+            for k in range(4):
+                z = board + k * (sz - 2 * board) / 3
+                shapes.append((p.GEOM_BOX, [sx / 2, sy / 2, board], [0, 0, z]))
+        else:  # box, wall
+            shapes = [(p.GEOM_BOX, [sx / 2, sy / 2, sz / 2], [0, 0, sz / 2])]
+        self._add_static(shapes, oid, color, base, o.yaw)
+
+    def _build_person(self, w: Walker, person, rng) -> None:
+        shirt = person.color if person.color is not None else tuple(rng.uniform(0.05, 0.95, 3))
+        trousers = tuple(rng.uniform(0.05, 0.6, 3))
+        skin = tuple(np.array([0.93, 0.75, 0.6]) * rng.uniform(0.45, 1.0))
+        part_color = {0: trousers, 1: shirt, 2: skin, 3: shirt, 4: shirt, 5: skin, 6: shirt, 7: shirt, 8: skin,
+                      9: trousers, 10: trousers, 11: (0.1, 0.1, 0.1), 12: trousers, 13: trousers, 14: (0.1, 0.1, 0.1)}
+        for cid in (self._client, self._query_client):
+            with quiet_stdout():
+                body = p.loadURDF(HUMANOID_URDF, [0, 0, 0], globalScaling=w.global_scaling, useFixedBase=True,
+                                  physicsClientId=cid)
+            n = p.getNumJoints(body, physicsClientId=cid)
+            if cid == self._client:
+                for link in range(-1, n):
+                    p.setCollisionFilterGroupMask(body, link, 0, 0, physicsClientId=cid)
+                    p.changeDynamics(body, link, mass=0.0, physicsClientId=cid)
+                    p.changeVisualShape(body, link, rgbaColor=list(part_color.get(link, shirt)) + [1.0],
+                                        physicsClientId=cid)
+            w.bodies.append((cid, body))
+
+    def _build_drone(self) -> None:
+        sc = self.scenario
+        quat = p.getQuaternionFromEuler([0, 0, sc.drone.yaw])
+        self.drone = p.loadURDF(str(QUADROTOR_URDF), sc.drone.start, quat, flags=p.URDF_USE_INERTIA_FROM_FILE,
+                                physicsClientId=self._client)
+        p.changeDynamics(self.drone, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=self._client)
+        p.setCollisionFilterGroupMask(self.drone, -1, _GROUP_DRONE, _GROUP_STATIC, physicsClientId=self._client)
+        self._drone_proxy = p.loadURDF(str(QUADROTOR_URDF), sc.drone.start, quat, useFixedBase=True,
+                                       physicsClientId=self._query_client)
+
+    # ------------------------------------------------------------------ scripted camera paths
+
+    def _make_camera_path(self):
+        cp = self.scenario.camera_path
+        if cp is None:
+            return None
+        if cp.keyframes:
+            kf = np.array(cp.keyframes)
+            t_k = kf[:, 0]
+            yaw_k = np.unwrap(kf[:, 4])
+
+            def at(t):
+                pos = np.array([np.interp(t, t_k, kf[:, i]) for i in (1, 2, 3)])
+                if len(t_k) > 1 and t_k[0] <= t < t_k[-1]:
+                    i = int(np.searchsorted(t_k, t, side="right")) - 1
+                    vel = (kf[i + 1, 1:4] - kf[i, 1:4]) / (t_k[i + 1] - t_k[i])
+                else:
+                    vel = np.zeros(3)
+                return pos, vel, float(np.interp(t, t_k, yaw_k))
+            return at
+
+        walker = self.walkers[cp.follow_person]
+        path = walker.path
+
+        def follow(t):
+            # Walk the person's own trail, follow_distance behind, looking at the person.
+            s = path.distance(t)
+            xy = path.trail_point(s - cp.follow_distance)
+            target = path.point_at(s)
+            moving = path.start_delay <= t and s < path.length
+            v = path.velocity(t) if moving else np.zeros(2)
+            d = target - xy
+            yaw = math.atan2(d[1], d[0])
+            return np.array([xy[0], xy[1], cp.follow_height]), np.array([v[0], v[1], 0.0]), yaw
+        return follow
+
+    # ------------------------------------------------------------------ state
+
+    def state(self) -> DroneState:
+        c = self._client
+        pos, quat = p.getBasePositionAndOrientation(self.drone, physicsClientId=c)
+        lin, ang = p.getBaseVelocity(self.drone, physicsClientId=c)
+        R = np.array(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
+        return DroneState(position=np.array(pos), velocity=np.array(lin), R=R, omega=R.T @ np.array(ang))
+
+    def T_world_body(self) -> np.ndarray:
+        pos, quat = p.getBasePositionAndOrientation(self.drone, physicsClientId=self._client)
+        T = np.eye(4)
+        T[:3, :3] = np.array(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
+        T[:3, 3] = pos
+        return T
+
+    def _set_body_pose(self, pos, vel, yaw) -> None:
+        p.resetBasePositionAndOrientation(self.drone, list(pos), p.getQuaternionFromEuler([0, 0, yaw]),
+                                          physicsClientId=self._client)
+        p.resetBaseVelocity(self.drone, list(vel), [0, 0, 0], physicsClientId=self._client)
+
+    def reference_for(self, t: float) -> Reference | None:
+        """The scripted path as a reference (flown camera paths)."""
+        if self._camera_path is None:
+            return None
+        pos, vel, yaw = self._camera_path(t)
+        return Reference(position=pos, velocity=vel, yaw=yaw)
+
+    # ------------------------------------------------------------------ stepping
+
+    def step(self, reference: Reference | None = None) -> SensorFrame | None:
+        """Advance one control period. Returns the sensor frame captured in it, if any.
+
+        ``reference`` defaults to the scenario's scripted camera path, else the last
+        reference, else hovering at the start. Carried camera paths ignore it.
+        """
+        cp = self.scenario.camera_path
+        carried = cp is not None and cp.mode == "carried"
+        if not carried:
+            if reference is None:
+                reference = self.reference_for(self.time) or self._last_reference or Reference.hover(
+                    self.scenario.drone.start, self.scenario.drone.yaw)
+            self._last_reference = reference
+            self._thrust_cmd = self.controller(self.state(), reference, self.dt * self.steps_per_control)
+        new_frame = None
+        for _ in range(self.steps_per_control):
+            if carried:
+                self._carried_step()
+            else:
+                self._physics_step()
+            if self.camera_on and self.step_count % self.steps_per_frame == 0:
+                self._capture()
+                new_frame = self._frame
+        return new_frame
+
+    def advance(self, duration: float, reference: Reference | None = None) -> list[SensorFrame]:
+        """Step for ``duration`` seconds with a fixed reference; return the frames captured."""
+        frames = []
+        n = int(round(duration / (self.dt * self.steps_per_control)))
+        for _ in range(n):
+            f = self.step(reference)
+            if f is not None:
+                frames.append(f)
+        return frames
+
+    def _rotor_update(self) -> np.ndarray:
+        """First-order rotor speed response to the commanded thrusts; returns actual thrusts."""
+        v = self.vehicle
+        cmd = np.sqrt(np.clip(self._thrust_cmd, 0.0, v.max_rotor_thrust) / v.kf)
+        tau = np.where(cmd > self._rotor_speed, v.tau_up, v.tau_down)
+        self._rotor_speed = cmd + (self._rotor_speed - cmd) * np.exp(-self.dt / tau)
+        return v.kf * self._rotor_speed**2
+
+    def _physics_step(self) -> None:
+        c, v = self._client, self.vehicle
+        thrusts = self._rotor_update()
+        pos, quat = p.getBasePositionAndOrientation(self.drone, physicsClientId=c)
+        lin, _ = p.getBaseVelocity(self.drone, physicsClientId=c)
+        R = np.array(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
+        for i in range(4):
+            p.applyExternalForce(self.drone, -1, [0.0, 0.0, float(thrusts[i])], self._rotor_pos[i],
+                                 p.LINK_FRAME, physicsClientId=c)
+        yaw_moment = float(self._yaw_row @ thrusts)
+        drag = -(R @ (v.drag * (R.T @ np.array(lin))))
+        p.applyExternalTorque(self.drone, -1, (R[:, 2] * yaw_moment).tolist(), p.WORLD_FRAME, physicsClientId=c)
+        p.applyExternalForce(self.drone, -1, drag.tolist(), list(pos), p.WORLD_FRAME, physicsClientId=c)
+        p.stepSimulation(physicsClientId=c)
+        self._after_step()
+
+    def _carried_step(self) -> None:
+        pos, vel, yaw = self._camera_path((self.step_count + 1) * self.dt)
+        self._set_body_pose(pos, vel, yaw)
+        p.performCollisionDetection(physicsClientId=self._client)
+        self._after_step()
+
+    def _after_step(self) -> None:
+        """Advance the clock; pose people and measure clearance at the control rate; check
+        contacts at every physics step."""
+        self.step_count += 1
+        self.time = self.step_count * self.dt
+        if self.step_count % self.steps_per_control == 0:
+            for w in self.walkers:
+                w.apply(p, self.time)
+            self._update_clearance()
+        self._check_contacts()
+
+    # ------------------------------------------------------------------ collisions
+
+    def _drone_pose(self):
+        pos, quat = p.getBasePositionAndOrientation(self.drone, physicsClientId=self._client)
+        return pos, quat
+
+    def _check_contacts(self) -> None:
+        """Collision events: static world from the physics contacts, people from the query
+        client whenever the drone is close to one."""
+        touching: set[int] = {cp_[2] for cp_ in p.getContactPoints(bodyA=self.drone, physicsClientId=self._client)}
+        if self._person_clearance < 0.3:
+            pos, quat = self._drone_pose()
+            p.resetBasePositionAndOrientation(self._drone_proxy, pos, quat, physicsClientId=self._query_client)
+            for w, oid in zip(self.walkers, self.person_ids):
+                if p.getClosestPoints(self._drone_proxy, w.bodies[1][1], 0.0, physicsClientId=self._query_client):
+                    touching.add(-oid)  # negative: person ids, apart from PyBullet uids
+        for uid in touching - self._in_contact:
+            if uid < 0:
+                oid, kind = -uid, "person"
+            else:
+                oid = int(self._seg_lut[uid + 1]) if uid + 1 < len(self._seg_lut) else STRUCTURE_ID
+                kind = "structure" if oid == STRUCTURE_ID else "static"
+            self.collisions.append(CollisionEvent(self.time, oid, kind, tuple(self._drone_pose()[0])))
+        self._in_contact = touching
+
+    def _update_clearance(self) -> None:
+        """Distance from the drone's collision box to the structure (exact, box against the
+        corridor's planes), to static obstacles and to people (PyBullet closest points, exact
+        below CLEARANCE_CAP)."""
+        c, q = self._client, self._query_client
+        pos, quat = self._drone_pose()
+        pos_a = np.array(pos)
+        R = np.array(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
+        corners = self._corners @ R.T + pos_a
+        co = self.scenario.corridor
+        lo, hi = corners.min(axis=0), corners.max(axis=0)
+        gaps = [lo[2], co.width / 2 - hi[1], co.width / 2 + lo[1], lo[0], co.length - hi[0]]
+        if co.ceiling:
+            gaps.append(co.height - hi[2])
+        clear = {"structure": min(max(min(gaps), 0.0), CLEARANCE_CAP), "static": CLEARANCE_CAP,
+                 "person": CLEARANCE_CAP}
+        if self._obstacle_uids:
+            gap = np.linalg.norm(np.maximum(0.0, np.maximum(self._obstacle_lo - hi, lo - self._obstacle_hi)), axis=1)
+            for k in np.flatnonzero(gap < CLEARANCE_CAP):
+                pts = p.getClosestPoints(self.drone, self._obstacle_uids[k], CLEARANCE_CAP, physicsClientId=c)
+                if pts:
+                    clear["static"] = min(clear["static"], max(min(x[8] for x in pts), 0.0))
+        proxy_posed = False
+        reach = self.vehicle.radius + CLEARANCE_CAP
+        for w in self.walkers:
+            root = w.path.position(self.time)
+            if math.hypot(root[0] - pos[0], root[1] - pos[1]) - _PERSON_REACH * w.height > reach:
+                continue
+            if not proxy_posed:
+                p.resetBasePositionAndOrientation(self._drone_proxy, pos, quat, physicsClientId=q)
+                proxy_posed = True
+            pts = p.getClosestPoints(self._drone_proxy, w.bodies[1][1], CLEARANCE_CAP, physicsClientId=q)
+            if pts:
+                clear["person"] = min(clear["person"], max(min(x[8] for x in pts), 0.0))
+        self._person_clearance = clear["person"]
+        for k, d in clear.items():
+            self.min_clearance[k] = min(self.min_clearance[k], d)
+        self.clearance_log.append((self.time, clear["static"], clear["person"], clear["structure"]))
+
+    @property
+    def collided(self) -> bool:
+        return bool(self.collisions)
+
+    # ------------------------------------------------------------------ camera
+
+    def _camera_pose(self) -> np.ndarray:
+        return self.T_world_body() @ self.T_body_camera
+
+    def _odometry(self, T_true: np.ndarray) -> np.ndarray:
+        nz = self.scenario.noise
+        if not nz.enabled or (nz.odom_position_std == 0 and nz.odom_rotation_std == 0):
+            return T_true.copy()
+        T = T_true.copy()
+        T[:3, 3] += self._rng_odom.normal(0.0, nz.odom_position_std, 3)
+        rv = self._rng_odom.normal(0.0, nz.odom_rotation_std, 3)
+        angle = float(np.linalg.norm(rv))
+        if angle > 0:
+            k = rv / angle
+            Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+            T[:3, :3] = (np.eye(3) + math.sin(angle) * Kx + (1 - math.cos(angle)) * Kx @ Kx) @ T[:3, :3]
+        return T
+
+    def _capture(self) -> None:
+        cam = self.scenario.camera
+        T_true = self._camera_pose()
+        t0 = time.perf_counter()  # benchmark bookkeeping only: no result depends on it
+        out = render(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on)
+        self.render_wall_time += time.perf_counter() - t0
+        z = self._noise_model.apply(out.depth, self._rng_noise)
+        z[z < cam.min_range] = 0.0
+        z[z > min(cam.max_range, 65.535)] = 0.0
+        z *= np.float32(1000.0)
+        z += np.float32(0.5)  # round to the nearest millimetre on the cast
+        depth_mm = z.astype(np.uint16)
+        seq = self.step_count // self.steps_per_frame
+        self._frame = SensorFrame(depth=depth_mm, color=out.color if cam.color else None,
+                                  intrinsics=self.intrinsics, T_world_camera=self._odometry(T_true),
+                                  stamp=self.time, seq=seq)
+        seg = None
+        if out.segmentation is not None:
+            s = out.segmentation
+            s = np.where((s >= -1) & (s + 1 < len(self._seg_lut)), s, -1)
+            seg = self._seg_lut[s + 1]
+        st = self.state()
+        self._truth = GroundTruth(stamp=self.time, seq=seq, obstacles=self._obstacle_truth(),
+                                  T_world_camera=T_true, drone_position=st.position, drone_velocity=st.velocity,
+                                  segmentation=seg)
+
+    def _obstacle_truth(self) -> tuple[ObstacleTruth, ...]:
+        out = []
+        labels = {i + 1: o.kind for i, o in enumerate(self.scenario.obstacles)}
+        for b in self.static_bodies:
+            if b.obstacle_id != STRUCTURE_ID:
+                out.append(ObstacleTruth(b.obstacle_id, "static", labels[b.obstacle_id], b.aabb_min.copy(),
+                                         b.aabb_max.copy(), np.zeros(3)))
+        for w, oid in zip(self.walkers, self.person_ids):
+            cid, body = w.bodies[1]  # the query client holds the collidable, posed copy
+            lo, hi = np.array(p.getAABB(body, -1, physicsClientId=cid))
+            for link in range(p.getNumJoints(body, physicsClientId=cid)):
+                a, b = p.getAABB(body, link, physicsClientId=cid)
+                lo, hi = np.minimum(lo, a), np.maximum(hi, b)
+            lo[2] = max(lo[2], 0.0)
+            v = w.path.velocity(self.time)
+            out.append(ObstacleTruth(oid, "person", "person", lo, hi, np.array([v[0], v[1], 0.0])))
+        return tuple(out)
+
+    def latest_frame(self) -> SensorFrame:
+        return self._frame
+
+    def ground_truth(self) -> GroundTruth:
+        """Truth at the time of ``latest_frame()``."""
+        return self._truth
