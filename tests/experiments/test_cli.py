@@ -1,0 +1,59 @@
+"""The dodt-nav command line: simulate output, and clean errors for user mistakes."""
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "experiments.cli", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=300)
+
+
+def test_simulate_writes_depth_in_mm_color_truth_and_summary(tmp_path):
+    out = tmp_path / "run"
+    r = _cli("simulate", "wall_pass", "--seed", "1", "--out", str(out), "--duration", "0.5", "--save-every", "5")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["seed"] == 1 and summary["frames_saved"] == 4  # frames 0, 5, 10, 15
+    sensor = json.loads((out / "sensor.json").read_text())
+    truth = json.loads((out / "ground_truth.json").read_text())
+    assert [f["seq"] for f in sensor["frames"]] == [0, 5, 10, 15]
+    assert sensor["intrinsics"]["fx"] == pytest.approx(387.1537)
+    d = cv2.imread(str(out / sensor["frames"][-1]["depth"]), cv2.IMREAD_UNCHANGED)
+    assert d.dtype == np.uint16 and d.shape == (480, 640)
+    assert 500 < np.median(d[d > 0]) < 10000  # millimetres
+    c = cv2.imread(str(out / sensor["frames"][-1]["color"]))
+    assert c.shape == (480, 640, 3)
+    seg = cv2.imread(str(out / "segmentation" / "000015.png"), cv2.IMREAD_UNCHANGED)
+    ids = {o["id"] for o in truth["frames"][-1]["obstacles"]}
+    assert ids == {1, 2, 3} and set(np.unique(seg)) - {0, 1} <= {i + 1 for i in ids}
+    person = [o for o in truth["frames"][-1]["obstacles"] if o["kind"] == "person"][0]
+    assert np.linalg.norm(person["velocity"]) == pytest.approx(1.0)
+    assert "T_world_camera" in sensor["frames"][0] and "obstacles" not in sensor["frames"][0]
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["simulate", "no_such_scenario", "--out", "x"], "no_such_scenario: no such file, and not a shipped scenario"),
+    (["simulate", "corridor", "--out", "x", "--save-every", "0"], "--save-every: must be >= 1"),
+    (["validate", "BAD"], "BAD.toml: corridor.width: must be >= 1.0, got 0.5"),
+    (["validate", "UNKNOWN"], "UNKNOWN.toml: drone.colour: unknown key"),
+])
+def test_user_mistakes_exit_2_with_one_line_and_no_traceback(tmp_path, args, fragment):
+    (tmp_path / "BAD.toml").write_text("[corridor]\nwidth = 0.5\n")
+    (tmp_path / "UNKNOWN.toml").write_text("[drone]\ncolour = 'red'\n")
+    args = [a if a not in ("BAD", "UNKNOWN") else str(tmp_path / f"{a}.toml") for a in args]
+    r = _cli(*args, cwd=tmp_path)
+    assert r.returncode == 2
+    assert fragment in r.stderr
+    assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_scenarios_lists_every_shipped_scenario():
+    r = _cli("scenarios")
+    assert r.returncode == 0
+    names = {line.split()[0] for line in r.stdout.splitlines()}
+    assert {"corridor", "circles", "follow_person", "wall_pass", "partial_obstacle", "static_only"} <= names
