@@ -9,10 +9,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pybullet as p
 
 from sim import World, load_scenario
-from sim.camera import render
+from sim.camera import quiet_stdout, render
+
+with quiet_stdout():  # PyBullet prints its build time on import
+    import pybullet as p
 from sim.trajectories import straight_line
 
 

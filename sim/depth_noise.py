@@ -71,7 +71,7 @@ class DepthNoiseModel:
             cv2.subtract(zmax, zmin, dst=n)
             cv2.scaleAdd(out, -noise.edge_threshold, n, dst=n)  # jump - threshold * z
             cv2.compare(n, 0.0, cv2.CMP_GT, dst=edge)
-            edge[invalid != 0] = 0
+            cv2.subtract(edge, invalid, dst=edge)  # saturating: invalid pixels are no edges
             idx = np.flatnonzero(edge.view(np.bool_))  # 255 bytes read as True
             if idx.size:
                 u = rng.random(idx.size, dtype=np.float32)

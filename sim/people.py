@@ -100,6 +100,31 @@ def load_walk_clip() -> WalkClip:
     return WalkClip(sph=sph, rev=rev, root_offset=root, root_quat=f[:, 4:8][:, wxyz_to_xyzw], stride=stride)
 
 
+@dataclass(frozen=True)
+class _PoseTable:
+    """The gait cycle sampled finely (10 samples per clip interval, 3 mm of travel at the
+    nominal stride), so that posing a person costs a lookup instead of interpolation."""
+
+    targets: list  # per sample: joint targets for _SPHERICAL + _REVOLUTE, as PyBullet takes them
+    root_offset: list  # per sample: (3,) root offset in the clip frame, nominal size
+    base_quat: list  # per sample: (4,) root orientation after the Y-up -> Z-up roll
+
+
+@lru_cache(maxsize=1)
+def _pose_table(samples_per_interval: int = 10) -> _PoseTable:
+    c = load_walk_clip()
+    targets, offsets, quats = [], [], []
+    for j in range(c.n_intervals * samples_per_interval):
+        i, w = divmod(j, samples_per_interval)
+        w /= samples_per_interval
+        sph = _nlerp(c.sph[i], c.sph[i + 1], w)
+        rev = (1 - w) * c.rev[i] + w * c.rev[i + 1]
+        targets.append([q.tolist() for q in sph] + [[a] for a in rev.tolist()])
+        offsets.append(((1 - w) * c.root_offset[i] + w * c.root_offset[i + 1]).tolist())
+        quats.append(_qmul(_Q_X90, _nlerp(c.root_quat[i], c.root_quat[i + 1], w)))
+    return _PoseTable(targets=targets, root_offset=offsets, base_quat=quats)
+
+
 # --------------------------------------------------------------------------- paths
 
 
@@ -238,16 +263,11 @@ class Walker:
         return HUMANOID_BASE_SCALE * self.k
 
     def pose(self, t: float):
-        """(base position, base quaternion, spherical joint quats (8, 4), revolute angles (4,))."""
-        c = self.clip
+        """(base position, base quaternion, joint targets for _SPHERICAL + _REVOLUTE)."""
+        table = _pose_table()
         s = self.path.distance(t)
-        phase = (s / (c.stride * self.k)) % 1.0 * c.n_intervals
-        i = int(phase)
-        w = phase - i
-        sph = _nlerp(c.sph[i], c.sph[i + 1], w)
-        rev = (1 - w) * c.rev[i] + w * c.rev[i + 1]
-        off = (1 - w) * c.root_offset[i] + w * c.root_offset[i + 1]
-        rq = _nlerp(c.root_quat[i], c.root_quat[i + 1], w)
+        k = int(s / (self.clip.stride * self.k) % 1.0 * len(table.targets))
+        off = table.root_offset[k]
         yaw = self.path.heading(t)
         cy, sy = math.cos(yaw), math.sin(yaw)
         # Clip frame (x forward, y up, z right-ish) -> world after the +90 deg roll: (x, -z, y).
@@ -255,13 +275,12 @@ class Walker:
         xy = self.path.point_at(s)
         pos = [xy[0] + cy * lx - sy * ly, xy[1] + sy * lx + cy * ly, off[1] * self.k]
         q_yaw = np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
-        quat = _qmul(q_yaw, _qmul(_Q_X90, rq))
-        return pos, quat, sph, rev
+        quat = _qmul(q_yaw, table.base_quat[k])
+        return pos, quat, table.targets[k]
 
     def apply(self, p, t: float) -> None:
-        pos, quat, sph, rev = self.pose(t)
+        pos, quat, targets = self.pose(t)
         quat = quat.tolist()
-        targets = [q.tolist() for q in sph] + [[a] for a in rev.tolist()]
         joints = _SPHERICAL + _REVOLUTE
         for client, body in self.bodies:
             p.resetBasePositionAndOrientation(body, pos, quat, physicsClientId=client)
