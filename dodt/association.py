@@ -1,0 +1,95 @@
+"""Data association between predicted tracks and new detections (paper Sec. III-C).
+
+feature (paper): feat = [position, dimensions, point count, point spread]; each difference is
+normalised by a scale (position: grown by the track's predicted uncertainty, so a track coasting
+through an occlusion still finds its obstacle again), similarity = exp(-||d||^2), accepted above
+a threshold. The position of the track is its prediction (the paper's linear propagation).
+cosine (ref code): cosine similarity of weighted raw features, plus overlapping boxes.
+center: nearest predicted centre within a gate (w/o FAT, baselines).
+Assignment is one-to-one, best pairs first (the reference code lets two detections take one
+track).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dodt.config import AssociationConfig
+from dodt.detection import Detection
+from dodt.geometry import iou_matrix
+
+
+@dataclass
+class TrackView:
+    """What association needs to know about a track."""
+
+    center: np.ndarray  # (3,) predicted
+    size: np.ndarray
+    count: int
+    spread: np.ndarray  # (3,) point standard deviation
+    position_variance: float
+
+
+def features(det: Detection) -> tuple[int, np.ndarray]:
+    pts = det.points
+    if len(pts) >= 2:
+        return len(pts), pts.std(axis=0).astype(float)
+    return len(pts), np.zeros(3)
+
+
+def similarity_matrix(tracks: list[TrackView], dets: list[Detection], cfg: AssociationConfig,
+                      camera: np.ndarray) -> tuple[np.ndarray, float]:
+    """(T, D) scores and the acceptance threshold for the configured method."""
+    T, D = len(tracks), len(dets)
+    if T == 0 or D == 0:
+        return np.zeros((T, D)), 0.0
+    tc = np.array([t.center for t in tracks])
+    dc = np.array([d.center for d in dets])
+    if cfg.method == "center":
+        dist = np.linalg.norm(tc[:, None, :2] - dc[None, :, :2], axis=2)
+        return np.where(dist < cfg.center_gate, -dist, -np.inf), -np.inf
+    ts = np.array([t.size for t in tracks])
+    ds = np.array([d.size for d in dets])
+    dfeat = [features(d) for d in dets]
+    dn = np.array([f[0] for f in dfeat], float)
+    dstd = np.array([f[1] for f in dfeat])
+    tn = np.array([t.count for t in tracks], float)
+    tstd = np.array([t.spread for t in tracks])
+    if cfg.method == "cosine":
+        def vec(c, s, n, sd):
+            return np.hstack([2.0 * (c - camera), s, 0.5 * n[:, None], 0.5 * sd])
+        a, b = vec(tc, ts, tn, tstd), vec(dc, ds, dn, dstd)
+        a /= np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-12)
+        b /= np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-12)
+        sim = a @ b.T
+        overlap = iou_matrix(tc, ts, dc, ds) > 0
+        return np.where(overlap, sim, -np.inf), cfg.cosine_threshold
+    pos_scale = np.sqrt(cfg.position_scale**2 + np.array([t.position_variance for t in tracks]))
+    dpos = (tc[:, None, :] - dc[None, :, :])
+    d2 = (dpos[..., 0] ** 2 + dpos[..., 1] ** 2) / pos_scale[:, None] ** 2 + dpos[..., 2] ** 2 / cfg.position_scale**2
+    d2 += np.sum((ts[:, None, :] - ds[None, :, :]) ** 2, axis=2) / cfg.size_scale**2
+    rel = np.abs(tn[:, None] - dn[None, :]) / np.maximum(np.maximum(tn[:, None], dn[None, :]), 1.0)
+    d2 += (rel / cfg.count_scale) ** 2
+    d2 += np.sum((tstd[:, None, :] - dstd[None, :, :]) ** 2, axis=2) / cfg.spread_scale**2
+    return np.exp(-d2), cfg.similarity_threshold
+
+
+def assign(scores: np.ndarray, threshold: float) -> list[tuple[int, int]]:
+    """One-to-one pairs (track, detection), best scores first, each above the threshold."""
+    pairs = []
+    if scores.size == 0:
+        return pairs
+    s = scores.copy()
+    order = np.argsort(-s, axis=None, kind="stable")
+    used_t, used_d = set(), set()
+    for flat in order:
+        t, d = divmod(int(flat), s.shape[1])
+        if not s[t, d] > threshold:
+            break
+        if t in used_t or d in used_d:
+            continue
+        pairs.append((t, d))
+        used_t.add(t)
+        used_d.add(d)
+    return pairs

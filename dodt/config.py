@@ -1,0 +1,127 @@
+"""Configuration of every DODT component, with defaults and where each comes from.
+
+"paper" = Xu et al., RA-L 2024 (shared/reference/dodt-paper.tex); "ref" = the authors' ROS code
+(onboard_detector cfg/detector_param.yaml, see shared/reference/dodt-reference-code.md);
+"ours" = chosen here, with the reason beside it. Ablations and baselines are configurations
+(dodt.presets), not forks of the code.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class DepthConfig:
+    depth_min: float = 0.5  # m, ref depth_min_value
+    depth_max: float = 5.0  # m, ref depth_max_value
+    margin: int = 10  # px border skipped, ref depth_filter_margin
+    skip: int = 2  # every skip-th row and column, ref depth_skip_pixel
+    max_frame_gap: float = 0.5  # s; a longer gap between frames restarts the tracks' velocity estimates (ours)
+
+
+@dataclass(frozen=True)
+class VoxelConfig:
+    resolution: float = 0.1  # m, ref (hard-coded)
+    # ref voxel_occupied_thresh is 15; ours is 6: the simulated humanoid's limbs are thinner than a
+    # real person's, and 15 leaves 20 points on a person at 4.5 m where 6 keeps 58
+    occupied_threshold: int = 6  # points per voxel
+    ground_height: float = 0.2  # m, points below are dropped, ref ground_height
+    ceiling_height: float = 2.8  # m, points above are dropped (ours: the ref has no ceiling filter)
+    local_range: float = 5.0  # m around the camera, ref localSensorRange
+
+
+@dataclass(frozen=True)
+class UDepthConfig:
+    """ref uvDetector.cpp constructor constants."""
+
+    col_scale: float = 0.5
+    row_downsample: int = 4  # U-map bins = image rows / row_downsample
+    min_dist: float = 0.01  # m
+    threshold_point: int = 3  # a U-map cell counts if >= threshold_point * row_downsample
+    min_line_length: int = 6  # U-map cells
+    min_area: int = 25  # U-map cells (width x bins)
+    occlusion_factor: float = 1.3  # far = near + 1.3 * thickness
+    continuity_rows: int = 15  # rows of continuous depth that confirm a pixel (ref num_check)
+    blur_size: tuple[int, int] = (5, 9)  # GaussianBlur (width, height), sigma 10
+    blur_sigma: float = 10.0
+    extent_percentile: float = 2.0  # box from the 2nd-98th percentile of its points (ours: robust to noise)
+
+
+@dataclass(frozen=True)
+class DBSCANConfig:
+    # ref: epsilon 0.1 compared with a *squared* distance, so the effective radius is sqrt(0.1) = 0.32 m
+    eps: float = 0.3  # m, true distance
+    min_points: int = 8  # ref dbscan_min_points_cluster is 10 (with its 15-point voxels); ours 8
+    min_size_xy: float = 0.1  # m, boxes are at least this wide, ref
+
+
+@dataclass(frozen=True)
+class EnsembleConfig:
+    detectors: tuple[str, ...] = ("udepth", "dbscan")  # one name: that detector alone (w/o Ens)
+    iou_threshold: float = 0.05  # ref filtering_BBox_IOU_threshold (the paper gives no value)
+    fusion: str = "paper"  # paper: max dimensions, mean position; union: the ref code's union box
+
+
+@dataclass(frozen=True)
+class AssociationConfig:
+    method: str = "feature"  # feature (paper), cosine (ref code), center (w/o FAT and baselines)
+    similarity_threshold: float = 0.05  # exp(-d^2) > 0.05 <=> d^2 < 3 (ours; the paper gives no value)
+    # Normalisation scales of the feature differences (ours; the paper normalises without saying how):
+    position_scale: float = 0.4  # m, grown by the track's predicted position uncertainty
+    size_scale: float = 0.5  # m
+    count_scale: float = 0.6  # relative difference of point counts
+    spread_scale: float = 0.15  # m, point standard deviation
+    center_gate: float = 1.0  # m, centre-distance association's largest match distance
+    cosine_threshold: float = 0.9  # ref default similarity threshold for the cosine variant
+
+
+@dataclass(frozen=True)
+class KalmanConfig:
+    model: str = "ca"  # ca: constant acceleration (paper), cv: constant velocity (baselines)
+    p0: float = 0.25  # ref e_p
+    q_pos: float = 0.01  # ref e_q_pos
+    q_vel: float = 0.05  # ref e_q_vel
+    q_acc: float = 0.05  # ref e_q_acc
+    r_pos: float = 0.04  # ref e_r_pos
+    r_vel: float = 0.3  # ref e_r_vel
+    r_acc: float = 0.6  # ref e_r_acc
+    averaging_frames: int = 10  # pseudo-measurements span up to this many frames, ref
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    coast_time: float = 1.0  # s a track survives without detections on its prediction (beyond the paper)
+    history: int = 100  # states kept per track, ref history_size
+    output_history: float = 3.0  # s of centre history in the output (the paper's figures show 3 s)
+    fix_size_frames: int = 10  # ref fix_size_history_threshold
+    fix_size_change: float = 0.4  # ref fix_size_dimension_threshold (relative)
+
+
+@dataclass(frozen=True)
+class IdentificationConfig:
+    method: str = "voting"  # voting (paper), velocity (velocity threshold only, baselines)
+    frame_skip: int = 5  # k: compare with the cloud k frames back, ref frame_skip
+    velocity_threshold: float = 0.15  # m/s, T_vel on the filtered speed, ref dynamic_velocity_threshold
+    vote_velocity: float = 0.15  # m/s, T_vote per point, ref
+    vote_ratio: float = 0.8  # T_ratio, ref dynamic_voting_threshold
+    max_skip_ratio: float = 0.5  # ref maximum_skip_ratio
+    consistency: int = 3  # consecutive candidate frames to become dynamic, ref default
+    force_dynamic_window: int = 30  # ref frames_force_dynamic_check_range
+    force_dynamic_count: int = 10  # ref frames_force_dynamic
+    constrain_size: bool = False  # ref constrain_size: dynamic only if about person-sized
+    target_size: tuple[float, float, float] = (0.5, 0.5, 1.7)  # m, ref target_object_size
+    target_size_tolerance: float = 0.5  # m
+
+
+@dataclass(frozen=True)
+class DODTConfig:
+    name: str = "dodt"
+    depth: DepthConfig = field(default_factory=DepthConfig)
+    voxel: VoxelConfig = field(default_factory=VoxelConfig)
+    udepth: UDepthConfig = field(default_factory=UDepthConfig)
+    dbscan: DBSCANConfig = field(default_factory=DBSCANConfig)
+    ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
+    association: AssociationConfig = field(default_factory=AssociationConfig)
+    kalman: KalmanConfig = field(default_factory=KalmanConfig)
+    track: TrackConfig = field(default_factory=TrackConfig)
+    identification: IdentificationConfig = field(default_factory=IdentificationConfig)

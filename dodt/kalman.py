@@ -1,0 +1,69 @@
+"""Kalman filters over an obstacle's horizontal motion (paper Sec. III-C).
+
+Matrices carry the textbook names: state x, covariance P, transition F, measurement H,
+process noise Q, measurement noise R. predict: x = F x, P = F P F^T + Q; update with z:
+y = z - H x, S = H P H^T + R, K = P H^T S^-1, x = x + K y, P = (I - K H) P.
+
+Constant acceleration (paper): x = [px, py, vx, vy, ax, ay], F as the paper's A matrix, and
+H = I: position, velocity and acceleration are all "measured", the latter two as
+pseudo-measurements from the detection history (dodt.tracker). Constant velocity (the
+baselines' and w/o FAT's model): x = [px, py, vx, vy], H = I.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dodt.config import KalmanConfig
+
+
+class KalmanFilter:
+    def __init__(self, cfg: KalmanConfig, position: np.ndarray):
+        self.cfg = cfg
+        self.ca = cfg.model == "ca"
+        n = 6 if self.ca else 4
+        self.n = n
+        self.x = np.zeros(n)
+        self.x[:2] = position[:2]
+        self.P = np.eye(n) * cfg.p0
+        q = [cfg.q_pos] * 2 + [cfg.q_vel] * 2 + ([cfg.q_acc] * 2 if self.ca else [])
+        r = [cfg.r_pos] * 2 + [cfg.r_vel] * 2 + ([cfg.r_acc] * 2 if self.ca else [])
+        self.Q = np.diag(q)
+        self.R = np.diag(r)
+        self.H = np.eye(n)
+
+    def F(self, dt: float) -> np.ndarray:
+        F = np.eye(self.n)
+        F[0, 2] = F[1, 3] = dt
+        if self.ca:
+            F[0, 4] = F[1, 5] = 0.5 * dt * dt
+            F[2, 4] = F[3, 5] = dt
+        return F
+
+    def predict(self, dt: float) -> None:
+        F = self.F(dt)
+        self.x = F @ self.x
+        self.P = F @ self.P @ F.T + self.Q
+
+    def update(self, z: np.ndarray) -> None:
+        z = np.asarray(z, float)[: self.n]
+        y = z - self.H @ self.x
+        S = self.H @ self.P @ self.H.T + self.R
+        K = np.linalg.solve(S, self.H @ self.P).T  # P H^T S^-1 (S symmetric)
+        self.x = self.x + K @ y
+        self.P = (np.eye(self.n) - K @ self.H) @ self.P
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.x[:2]
+
+    @property
+    def velocity(self) -> np.ndarray:
+        return self.x[2:4]
+
+    @property
+    def acceleration(self) -> np.ndarray:
+        return self.x[4:6] if self.ca else np.zeros(2)
+
+    @property
+    def position_variance(self) -> float:
+        return float((self.P[0, 0] + self.P[1, 1]) / 2)

@@ -1,0 +1,173 @@
+"""The DODT pipeline: a sensor frame in, tracked obstacles out (paper Fig. 2).
+
+    perception = DODT(preset("dodt"))
+    result = perception.process(frame)   # dodt.frames.SensorFrame
+    for ob in result.dynamic: ...
+
+Detectors -> ensemble -> association -> Kalman filter -> identification, each timed. Input
+is checked: a wrong shape or dtype, or intrinsics that do not match the image, raise a
+ValueError naming the problem; bad data is skipped and counted instead (NaN / inf / negative
+depth pixels are invalid pixels; a frame with a non-finite pose or a timestamp that does not
+move forward is skipped; a gap longer than the coasting time restarts the tracks).
+A learned detector plugs in through ``learned_detector``: a callable (frame, depth_m,
+ensemble_detections) -> detections that fuses its own boxes with the ensemble's (the YOLO-MAD
+issue defines the rules).
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+
+import numpy as np
+
+from dodt.config import DODTConfig
+from dodt.dbscan import DBSCANDetector
+from dodt.detection import Detection
+from dodt.ensemble import ensemble
+from dodt.frames import SensorFrame
+from dodt.geometry import points_in_box
+from dodt.pointcloud import VoxelCloud
+from dodt.result import PerceptionResult
+from dodt.tracker import Tracker
+from dodt.udepth import UDepthDetector
+
+MODULES = ("point_cloud", "udepth", "dbscan", "ensemble", "association", "kalman", "identification")
+
+
+def validate_frame(frame: SensorFrame) -> None:
+    """Raise ValueError for malformed frames (a programming or configuration error)."""
+    d = frame.depth
+    K = frame.intrinsics
+    if not isinstance(d, np.ndarray) or d.ndim != 2:
+        raise ValueError(f"depth must be a 2-D array, got {type(d).__name__} with shape {getattr(d, 'shape', None)}")
+    if d.dtype not in (np.uint16, np.float32, np.float64):
+        raise ValueError(f"depth must be uint16 millimetres or float32/float64 metres, got dtype {d.dtype}")
+    if d.shape != (K.height, K.width):
+        raise ValueError(f"depth image is {d.shape[1]}x{d.shape[0]} but the intrinsics are for "
+                         f"{K.width}x{K.height}")
+    if not (math.isfinite(K.fx) and math.isfinite(K.fy) and K.fx > 0 and K.fy > 0):
+        raise ValueError(f"intrinsics fx, fy must be finite and positive, got {K.fx}, {K.fy}")
+    if frame.color is not None:
+        c = frame.color
+        if not isinstance(c, np.ndarray) or c.shape != (K.height, K.width, 3) or c.dtype != np.uint8:
+            raise ValueError(f"color must be a ({K.height}, {K.width}, 3) uint8 array aligned to depth, got "
+                             f"{getattr(c, 'shape', None)} {getattr(c, 'dtype', None)}")
+    T = np.asarray(frame.T_world_camera)
+    if T.shape != (4, 4):
+        raise ValueError(f"T_world_camera must be 4x4, got shape {T.shape}")
+
+
+class DODT:
+    def __init__(self, cfg: DODTConfig | None = None, learned_detector=None):
+        self.cfg = cfg or DODTConfig()
+        self.cloud = VoxelCloud(self.cfg.depth, self.cfg.voxel)
+        self.udepth = UDepthDetector(self.cfg.udepth, self.cfg.depth)
+        self.dbscan = DBSCANDetector(self.cfg.dbscan)
+        self.learned_detector = learned_detector
+        self.tracker = Tracker(self.cfg)
+        self.last_stamp: float | None = None
+        self.poses: dict[int, np.ndarray] = {}
+        self._pose_order: deque[int] = deque()
+        self.counters = {"frames": 0, "skipped_bad_pose": 0, "skipped_time": 0, "restarted_after_gap": 0,
+                         "bad_pixels": 0, "frames_with_bad_pixels": 0}
+        self._seq = 0
+
+    def reset(self) -> None:
+        self.tracker.reset()
+        self.last_stamp = None
+        self.poses.clear()
+        self._pose_order.clear()
+
+    # ------------------------------------------------------------------ helpers
+
+    def _skip(self, frame: SensorFrame, why: str, bad_pixels: int = 0) -> PerceptionResult:
+        self.counters[why] += 1
+        stamp = self.last_stamp if self.last_stamp is not None else 0.0
+        return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),
+                                timings_ms={m: 0.0 for m in MODULES} | {"total": 0.0}, skipped=why,
+                                bad_pixels=bad_pixels)
+
+    def _depth_m(self, frame: SensorFrame) -> tuple[np.ndarray, int]:
+        d = frame.depth
+        if d.dtype == np.uint16:
+            return d.astype(np.float32) * np.float32(frame.depth_scale), 0
+        z = d.astype(np.float32, copy=True)
+        bad = ~np.isfinite(z) | (z < 0)
+        n_bad = int(bad.sum())
+        if n_bad:
+            z[bad] = 0.0
+        return z, n_bad
+
+    def _detect(self, frame, depth_m, T, points) -> tuple[list[Detection], dict]:
+        cfg = self.cfg.ensemble
+        timings = {}
+        t0 = time.perf_counter()
+        ud = self.udepth(depth_m, frame.intrinsics, T) if "udepth" in cfg.detectors else []
+        t1 = time.perf_counter()
+        db = self.dbscan(points) if "dbscan" in cfg.detectors else []
+        t2 = time.perf_counter()
+        if len(cfg.detectors) == 2:
+            dets = ensemble(ud, db, cfg)
+        else:
+            dets = ud if cfg.detectors == ("udepth",) else db
+        if self.learned_detector is not None:
+            dets = self.learned_detector(frame, depth_m, dets)
+        # Every detection carries the filtered points inside its box: its features and votes.
+        for d in dets:
+            if len(d.points) == 0 and len(points):
+                d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
+        t3 = time.perf_counter()
+        timings.update(udepth=(t1 - t0) * 1e3, dbscan=(t2 - t1) * 1e3, ensemble=(t3 - t2) * 1e3)
+        return dets, {"udepth": ud, "dbscan": db, "ensemble": dets, "timings": timings}
+
+    # ------------------------------------------------------------------ main entry
+
+    def process(self, frame: SensorFrame) -> PerceptionResult:
+        validate_frame(frame)
+        t_start = time.perf_counter()
+        self.counters["frames"] += 1
+        T = np.asarray(frame.T_world_camera, dtype=np.float64)
+        stamp = float(frame.stamp)
+        depth_m, n_bad = self._depth_m(frame)
+        if n_bad:
+            self.counters["bad_pixels"] += n_bad
+            self.counters["frames_with_bad_pixels"] += 1
+        if not np.all(np.isfinite(T)):
+            return self._skip(frame, "skipped_bad_pose", n_bad)
+        if not math.isfinite(stamp) or (self.last_stamp is not None and stamp <= self.last_stamp):
+            return self._skip(frame, "skipped_time", n_bad)
+        dt = 0.0 if self.last_stamp is None else stamp - self.last_stamp
+        if dt > self.cfg.track.coast_time:
+            self.tracker.reset()  # everything may have moved: start again
+            self.counters["restarted_after_gap"] += 1
+            dt = 0.0
+        self.last_stamp = stamp
+        seq = self._seq
+        self._seq += 1
+        self.poses[seq] = T
+        self._pose_order.append(seq)
+        while len(self._pose_order) > self.cfg.identification.frame_skip + 1:
+            self.poses.pop(self._pose_order.popleft(), None)
+
+        t0 = time.perf_counter()
+        points = self.cloud(depth_m, frame.intrinsics, T)
+        t_cloud = (time.perf_counter() - t0) * 1e3
+        dets, debug = self._detect(frame, depth_m, T, points)
+
+        t0 = time.perf_counter()
+        if dt > 0:
+            self.tracker.predict(dt)
+        pairs = self.tracker.associate(dets, T[:3, 3])
+        t1 = time.perf_counter()
+        self.tracker.correct(dets, pairs, seq, stamp)
+        t2 = time.perf_counter()
+        for tr in self.tracker.tracks:
+            tr.identify(seq, self.poses, frame.intrinsics, self.cfg.depth.depth_max)
+        t3 = time.perf_counter()
+        timings = {"point_cloud": t_cloud, **debug["timings"], "association": (t1 - t0) * 1e3,
+                   "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3,
+                   "total": (t3 - t_start) * 1e3}
+        boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]] for k in ("udepth", "dbscan", "ensemble")}
+        return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),
+                                timings_ms=timings, detections=boxes, bad_pixels=n_bad)

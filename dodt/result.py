@@ -1,0 +1,42 @@
+"""What perception returns for each frame."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class TrackedObstacle:
+    id: int
+    center: np.ndarray  # (3,) world [m]; x, y filtered, z from the latest detection
+    size: np.ndarray  # (3,) [m]
+    velocity: np.ndarray  # (3,) [m/s], z = 0
+    acceleration: np.ndarray  # (3,) [m/s^2], z = 0
+    dynamic: bool
+    coasting: bool  # no detection this frame: the state is the Kalman prediction
+    age: float  # s since the track was born
+    history: np.ndarray  # (K, 4) recent [t, x, y, z] centres, oldest first
+    is_person: bool = False
+    position_std: float = 0.0  # m, predicted horizontal position uncertainty
+
+    def to_json(self) -> dict:
+        r = lambda a: [round(float(x), 4) for x in a]  # noqa: E731
+        return {"id": self.id, "center": r(self.center), "size": r(self.size), "velocity": r(self.velocity),
+                "acceleration": r(self.acceleration), "dynamic": self.dynamic, "coasting": self.coasting,
+                "age": round(self.age, 3), "is_person": self.is_person}
+
+
+@dataclass(frozen=True, eq=False)
+class PerceptionResult:
+    stamp: float
+    seq: int
+    obstacles: tuple[TrackedObstacle, ...]
+    timings_ms: dict[str, float]  # per module, wall time of this frame
+    detections: dict[str, list] = field(default_factory=dict)  # per detector: list of (center, size)
+    skipped: str | None = None  # why this frame was not processed, if it was not
+    bad_pixels: int = 0  # NaN, inf or negative depth pixels in this frame (treated as invalid)
+
+    @property
+    def dynamic(self) -> tuple[TrackedObstacle, ...]:
+        return tuple(o for o in self.obstacles if o.dynamic)
