@@ -39,7 +39,8 @@ class Track:
         self.born = stamp
         self.last_seen = stamp
         self.z = float(det.center[2])
-        self.size = det.size.copy()
+        self.size = det.size.copy()  # smoothed, for the output
+        self.det_size = det.size.copy()  # the latest detection's, for association
         self.count, self.spread = features(det)
         self.observations: deque[_Observation] = deque(maxlen=cfg.kalman.averaging_frames + 1)
         self.observations.append(_Observation(seq, stamp, det.center.copy(), np.zeros(2)))
@@ -48,16 +49,16 @@ class Track:
         self.history: deque[tuple[float, float, float, float]] = deque(maxlen=cfg.track.history)
         self.history.append((stamp, float(det.center[0]), float(det.center[1]), self.z))
         self.n_detections = 1
-        self.size_stable = 0
         self.candidates: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic_history: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic = False
         self.is_person = det.is_person
         self.coasting = False
+        self.missed = 0  # consecutive frames without a detection
 
     def view(self) -> TrackView:
         c = np.array([self.kf.position[0], self.kf.position[1], self.z])
-        return TrackView(center=c, size=self.size, count=self.count, spread=self.spread,
+        return TrackView(center=c, size=self.det_size, count=self.count, spread=self.spread,
                          position_variance=self.kf.position_variance)
 
     def update(self, det: Detection, seq: int, stamp: float) -> None:
@@ -75,14 +76,15 @@ class Track:
         self.kf.update(np.array([det.center[0], det.center[1], v[0], v[1], a[0], a[1]]))
         self.observations.append(_Observation(seq, stamp, det.center.copy(), v))
         self.z = float(det.center[2])
-        # The reference code's size freezing: a stable box keeps its size.
-        change = np.abs(det.size - self.size) / np.maximum(self.size, 1e-3)
-        self.size_stable = self.size_stable + 1 if np.all(change <= self.cfg.track.fix_size_change) else 0
-        if self.size_stable < self.cfg.track.fix_size_frames:
-            self.size = det.size.copy()
+        # Output size: smoothed over frames (the reference code freezes a stable size instead,
+        # which then cannot follow a person whose box changes as they turn or swing their arms).
+        a = self.cfg.track.size_smoothing
+        self.size = (1 - a) * self.size + a * det.size
+        self.det_size = det.size.copy()
         self.count, self.spread = features(det)
         self.clouds.append((seq, stamp, det.points))
         self.last_seen = stamp
+        self.missed = 0
         self.n_detections += 1
         self.is_person = self.is_person or det.is_person
         self.coasting = False
@@ -134,11 +136,63 @@ class Tracker:
 
     def predict(self, dt: float) -> None:
         for t in self.tracks:
+            if t.coasting and t.kf.ca:
+                t.kf.x[4:6] = 0.0  # unobserved acceleration would run away: coast at constant velocity
             t.kf.predict(dt)
 
+    def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray,
+                          depth_range: tuple[float, float], margin: float = 0.5) -> int:
+        """Delete coasting tracks whose predicted place is in view and seen through: the camera
+        sees clearly farther than where the obstacle should be, so it is not there (it is
+        occluded when something nearer is seen, and then it keeps coasting). Returns how many."""
+        R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
+        keep, dropped = [], 0
+        H, W = depth_m.shape
+        for tr in self.tracks:
+            if tr.coasting and tr.missed >= 3:
+                c = np.array([tr.kf.position[0], tr.kf.position[1], tr.z]) - t
+                pc = c @ R
+                if depth_range[0] <= pc[2] <= depth_range[1]:
+                    half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
+                    half_h = 0.5 * tr.size[2] * K.fy / pc[2]
+                    u = K.fx * pc[0] / pc[2] + K.cx
+                    v = K.fy * pc[1] / pc[2] + K.cy
+                    u0, u1 = int(max(u - half_w, 0)), int(min(u + half_w, W - 1))
+                    v0, v1 = int(max(v - half_h, 0)), int(min(v + half_h, H - 1))
+                    inside = (u1 - u0) >= 0.6 * 2 * half_w and (v1 - v0) >= 0.6 * 2 * half_h
+                    if inside and u1 > u0 and v1 > v0:
+                        win = depth_m[v0:v1 + 1:2, u0:u1 + 1:2]
+                        win = win[win > 0]
+                        # seen through: nearly everything in the box's image region lies behind it
+                        if win.size >= 20 and np.mean(win > pc[2] + margin) > 0.9:
+                            dropped += 1
+                            continue
+            keep.append(tr)
+        self.tracks = keep
+        return dropped
+
     def associate(self, dets: list[Detection], camera: np.ndarray) -> list[tuple[int, int]]:
-        scores, thr = similarity_matrix([t.view() for t in self.tracks], dets, self.cfg.association, camera)
-        return assign(scores, thr)
+        views = [t.view() for t in self.tracks]
+        scores, thr = similarity_matrix(views, dets, self.cfg.association, camera)
+        pairs = assign(scores, thr)
+        gate = self.cfg.association.fallback_gate
+        if gate > 0 and self.cfg.association.method != "center":
+            # Second stage: what the features left unmatched, matched by predicted position within
+            # the gate grown by the prediction's uncertainty (a partly seen obstacle changes shape).
+            ut = [i for i in range(len(views)) if i not in {p[0] for p in pairs}]
+            ud = [j for j in range(len(dets)) if j not in {p[1] for p in pairs}]
+            if ut and ud:
+                tc = np.array([views[i].center[:2] for i in ut])
+                dc = np.array([dets[j].center[:2] for j in ud])
+                dist = np.linalg.norm(tc[:, None] - dc[None], axis=2)
+                g = gate + 2.0 * np.sqrt([views[i].position_variance for i in ut])
+                # ... but never to something of another size: a wall is no person (paper Fig. 7)
+                ts = np.array([views[i].size for i in ut])
+                ds = np.array([dets[j].size for j in ud])
+                similar = np.max(np.abs(ts[:, None] - ds[None]), axis=2) < self.cfg.association.size_scale
+                cost = np.where((dist < g[:, None]) & similar, -dist, -np.inf)
+                pairs += [(ut[a], ud[b]) for a, b in assign(cost, -np.inf)]
+        return pairs
 
     def correct(self, dets: list[Detection], pairs: list[tuple[int, int]], seq: int, stamp: float) -> None:
         matched_t = {t for t, _ in pairs}
@@ -151,6 +205,7 @@ class Tracker:
                 if stamp - tr.last_seen > self.cfg.track.coast_time:
                     continue  # lost for too long
                 tr.coasting = True
+                tr.missed += 1
             survivors.append(tr)
             tr.history.append((stamp, float(tr.kf.position[0]), float(tr.kf.position[1]), tr.z))
         for di, det in enumerate(dets):

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +40,7 @@ from sim.scenario import Obstacle, Scenario
 from sim.vehicle import GRAVITY, QUADROTOR_URDF, load_vehicle
 
 _GROUP_DRONE, _GROUP_STATIC = 1, 4
+_egl_owner = None  # weakref to the one World that renders with EGL (see reset)
 CLEARANCE_CAP = 1.0  # m: clearances are exact below this, reported as this value above
 _PERSON_REACH = 0.6  # bounding-sphere radius of a person around the root, per metre of height
 
@@ -108,8 +111,19 @@ class World:
         c = self._client
         self.renderer = "tiny"
         if self.requested_renderer in ("auto", "egl"):
-            if load_egl(p, c):
+            global _egl_owner
+            other = _egl_owner() if _egl_owner is not None else None
+            if other is not None and other is not self:
+                # PyBullet's EGL plugin keeps global state: with two EGL clients in a process,
+                # closing one crashes the other (measured). One World at a time gets EGL.
+                if self.requested_renderer == "egl":
+                    raise RuntimeError("another World in this process already renders with EGL; close it first "
+                                       "(world.close() or a with-block) or use renderer='tiny'")
+                warnings.warn("another World in this process renders with EGL: this one uses TinyRenderer "
+                              "(close the other World first to get EGL)", stacklevel=2)
+            elif load_egl(p, c):
                 self.renderer = "egl"
+                _egl_owner = weakref.ref(self)
             elif self.requested_renderer == "egl":
                 raise RuntimeError("renderer 'egl' requested but PyBullet's EGL plugin did not load "
                                    "(is Mesa's libEGL installed?); use renderer = 'auto' or 'tiny'")
@@ -177,6 +191,9 @@ class World:
         return self._frame
 
     def close(self) -> None:
+        global _egl_owner
+        if _egl_owner is not None and _egl_owner() is self:
+            _egl_owner = None
         for cid in (self._client, self._query_client):
             if cid is not None:
                 try:

@@ -163,3 +163,22 @@ def test_sensor_frame_carries_only_what_a_robot_has():
     assert f.intrinsics.fx == pytest.approx(387.1537)
     assert not hasattr(f, "segmentation") and not hasattr(f, "obstacles")
     w.close()
+
+
+@pytest.mark.skipif("egl" not in RENDERERS, reason="EGL plugin not available")
+def test_one_world_at_a_time_renders_with_egl_and_closing_it_is_safe():
+    a = World(make_scenario(BOX_SCENE), seed=0, renderer="auto")
+    assert a.renderer == "egl"
+    with pytest.warns(UserWarning, match="renders with EGL"):
+        b = World(make_scenario(BOX_SCENE), seed=0, renderer="auto")
+    assert b.renderer == "tiny"
+    with pytest.raises(RuntimeError, match="already renders with EGL"):
+        World(make_scenario(BOX_SCENE), seed=0, renderer="egl")
+    a.close()  # with two EGL clients this crashed the other one
+    for _ in range(5):
+        b.step()
+    assert b.latest_frame().depth.max() > 0
+    b.close()
+    c = World(make_scenario(BOX_SCENE), seed=0, renderer="egl")  # EGL is free again
+    assert c.renderer == "egl"
+    c.close()
