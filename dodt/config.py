@@ -48,6 +48,7 @@ class UDepthConfig:
     blur_size: tuple[int, int] = (3, 5)  # GaussianBlur (width, height)
     blur_sigma: float = 1.5
     extent_percentile: float = 2.0  # box from the 2nd-98th percentile of its points (ours: robust to noise)
+    min_height: float = 0.2  # m; flatter boxes are floor patches, dropped (ours)
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,9 @@ class EnsembleConfig:
     detectors: tuple[str, ...] = ("udepth", "dbscan")  # one name: that detector alone (w/o Ens)
     iou_threshold: float = 0.05  # ref filtering_BBox_IOU_threshold (the paper gives no value)
     fusion: str = "paper"  # paper: max dimensions, mean position; union: the ref code's union box
+    # ours: boxes seen from the front are extended away from the camera to be as deep as they
+    # are wide, up to this many metres (0 turns it off); see dodt.geometry.complete_hidden_depth
+    complete_depth: float = 0.6
 
 
 @dataclass(frozen=True)
@@ -91,7 +95,9 @@ class KalmanConfig:
     r_pos: float = 0.04  # ref e_r_pos
     r_vel: float = 0.3  # ref e_r_vel
     r_acc: float = 0.6  # ref e_r_acc
-    averaging_frames: int = 10  # pseudo-measurements span up to this many frames, ref
+    # pseudo-measurements span up to this many frames: ref 10; ours 15 (0.5 s), which cut the
+    # velocity error on our scenarios from 0.32 to 0.26 m/s
+    averaging_frames: int = 15
 
 
 @dataclass(frozen=True)

@@ -45,3 +45,32 @@ def in_field_of_view(points_world: np.ndarray, T_world_camera: np.ndarray, K: Ca
 def points_in_box(points: np.ndarray, center: np.ndarray, size: np.ndarray, grow: float = 0.0) -> np.ndarray:
     lo, hi = box_bounds(center, np.asarray(size) + 2 * grow)
     return np.all((points >= lo) & (points <= hi), axis=1)
+
+
+def complete_hidden_depth(center: np.ndarray, size: np.ndarray, camera: np.ndarray,
+                          max_depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """Extend a box seen only from the front away from the camera.
+
+    A depth camera sees the near surface of an obstacle, so a box built from its points is
+    thinner along the viewing direction than the obstacle. When the box's horizontal extent
+    along the ray from the camera is smaller than its extent across it (capped at
+    ``max_depth``), its far side is pushed back until the two match: the obstacle is assumed
+    about as deep as it is wide. Axis-aligned in, axis-aligned out.
+    """
+    c, s = np.asarray(center, float).copy(), np.asarray(size, float).copy()
+    ray = c[:2] - np.asarray(camera, float)[:2]
+    n = np.linalg.norm(ray)
+    if n < 1e-6:
+        return c, s
+    r = np.abs(ray / n)
+    along = r[0] * s[0] + r[1] * s[1]
+    across = r[1] * s[0] + r[0] * s[1]
+    missing = min(across, max_depth) - along
+    if missing <= 0:
+        return c, s
+    # grow each horizontal axis in proportion to its share of the ray, on the far side
+    for a in range(2):
+        grow = missing * r[a]
+        s[a] += grow
+        c[a] += np.sign(ray[a]) * grow / 2
+    return c, s

@@ -26,7 +26,7 @@ from dodt.dbscan import DBSCANDetector
 from dodt.detection import Detection
 from dodt.ensemble import ensemble
 from dodt.frames import SensorFrame
-from dodt.geometry import points_in_box
+from dodt.geometry import complete_hidden_depth, points_in_box
 from dodt.pointcloud import VoxelCloud
 from dodt.result import PerceptionResult
 from dodt.tracker import Tracker
@@ -106,6 +106,9 @@ class DODT:
         ud = self.udepth(depth_m, frame.intrinsics, T) if "udepth" in cfg.detectors else []
         t1 = time.perf_counter()
         db = self.dbscan(points) if "dbscan" in cfg.detectors else []
+        if cfg.complete_depth > 0:  # before fusion, so that both detectors' boxes have volume
+            for d in ud + db:
+                d.center, d.size = complete_hidden_depth(d.center, d.size, T[:3, 3], cfg.complete_depth)
         t2 = time.perf_counter()
         if len(cfg.detectors) == 2:
             dets = ensemble(ud, db, cfg)

@@ -201,7 +201,7 @@ class UDepthDetector:
             step = max(2, int(math.sqrt((u1 - u0) * H / 3000.0)) + 1)
             n, lo, hi = _box_points(depth_m, u0, u1, near, far, c.continuity_rows + 1, margin, step,
                                     K.fx, K.fy, K.cx, K.cy, R, t, c.extent_percentile)
-            if n < 20:
+            if n < 20 or hi[2] - lo[2] < c.min_height:
                 continue
             dets.append(Detection.from_bounds(lo, hi, "udepth"))
         return dets
