@@ -48,8 +48,13 @@ def _dbscan_kernel(points, eps, min_points):
     for k in range(n_cells):
         start[k + 1] += start[k]
     eps2 = eps * eps
-    counts = np.zeros(n, np.int64)
+    # One pass finds every point's neighbours (a CSR list); the second pass reuses it.
+    cap = 64 * n
+    nbr = np.empty(cap, np.int64)
+    ptr = np.zeros(n + 1, np.int64)
+    m = 0
     for i in range(n):
+        xi, yi, zi = points[i, 0], points[i, 1], points[i, 2]
         for dx in (-1, 0, 1):
             x = cell[i, 0] + dx
             if x < 0 or x >= dims[0]:
@@ -58,51 +63,40 @@ def _dbscan_kernel(points, eps, min_points):
                 y = cell[i, 1] + dy
                 if y < 0 or y >= dims[1]:
                     continue
-                for dz in (-1, 0, 1):
-                    z = cell[i, 2] + dz
-                    if z < 0 or z >= dims[2]:
-                        continue
-                    k = (x * dims[1] + y) * dims[2] + z
-                    for s in range(start[k], start[k + 1]):
-                        j = order[s]
-                        d0 = points[i, 0] - points[j, 0]
-                        d1 = points[i, 1] - points[j, 1]
-                        d2 = points[i, 2] - points[j, 2]
-                        if d0 * d0 + d1 * d1 + d2 * d2 <= eps2:
-                            counts[i] += 1  # the point itself included, as the reference does
-    core = counts >= min_points
+                k0 = (x * dims[1] + y) * dims[2]
+                z0 = max(cell[i, 2] - 1, 0)
+                z1 = min(cell[i, 2] + 1, dims[2] - 1)
+                for s in range(start[k0 + z0], start[k0 + z1 + 1]):  # the z-neighbours are contiguous
+                    j = order[s]
+                    d0 = xi - points[j, 0]
+                    d1 = yi - points[j, 1]
+                    d2 = zi - points[j, 2]
+                    if d0 * d0 + d1 * d1 + d2 * d2 <= eps2:
+                        if m == cap:
+                            cap *= 2
+                            grown = np.empty(cap, np.int64)
+                            grown[:m] = nbr[:m]
+                            nbr = grown
+                        nbr[m] = j
+                        m += 1
+        ptr[i + 1] = m
+    core = np.empty(n, np.bool_)
+    for i in range(n):
+        core[i] = ptr[i + 1] - ptr[i] >= min_points  # the point itself included, as the reference does
     parent = np.arange(n)
     border_of = -np.ones(n, np.int64)
     for i in range(n):
-        for dx in (-1, 0, 1):
-            x = cell[i, 0] + dx
-            if x < 0 or x >= dims[0]:
+        for s in range(ptr[i], ptr[i + 1]):
+            j = nbr[s]
+            if not core[j]:
                 continue
-            for dy in (-1, 0, 1):
-                y = cell[i, 1] + dy
-                if y < 0 or y >= dims[1]:
-                    continue
-                for dz in (-1, 0, 1):
-                    z = cell[i, 2] + dz
-                    if z < 0 or z >= dims[2]:
-                        continue
-                    k = (x * dims[1] + y) * dims[2] + z
-                    for s in range(start[k], start[k + 1]):
-                        j = order[s]
-                        if not core[j]:
-                            continue
-                        d0 = points[i, 0] - points[j, 0]
-                        d1 = points[i, 1] - points[j, 1]
-                        d2 = points[i, 2] - points[j, 2]
-                        if d0 * d0 + d1 * d1 + d2 * d2 > eps2:
-                            continue
-                        if core[i]:
-                            a = _find(parent, i)
-                            b = _find(parent, j)
-                            if a != b:
-                                parent[max(a, b)] = min(a, b)
-                        elif border_of[i] < 0:
-                            border_of[i] = j
+            if core[i]:
+                a = _find(parent, i)
+                b = _find(parent, j)
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+            elif border_of[i] < 0:
+                border_of[i] = j
     next_label = 0
     root_label = -np.ones(n, np.int64)
     for i in range(n):

@@ -37,10 +37,31 @@ def _cmd_bench(args) -> int:
     if args.what == "sim":
         from experiments.bench_sim import run
 
-        load_scenario(args.scenario)  # validate before anything heavy
-        run(args.scenario, seconds=args.seconds, frames=args.frames, json_out=args.json)
+        load_scenario(args.scenario or "corridor")  # validate before anything heavy
+        run(args.scenario or "corridor", seconds=args.seconds, frames=args.frames, json_out=args.json)
         return 0
-    raise UserError(f"bench {args.what}: not implemented yet")
+    if args.what == "perception":
+        from dodt.presets import PRESETS
+        from experiments import bench_perception
+
+        scenarios = tuple(args.scenarios.split(",")) if args.scenarios else bench_perception.SCENARIOS
+        for s in scenarios:
+            load_scenario(s)
+        configs = args.configs.split(",") if args.configs else list(PRESETS)
+        unknown = [c for c in configs if c not in PRESETS]
+        if unknown:
+            raise UserError(f"--configs: unknown configuration {unknown[0]!r}; known: {', '.join(PRESETS)}")
+        if args.seeds < 1:
+            raise UserError("--seeds: must be >= 1")
+        duration = args.duration if args.duration else (6.0 if args.quick else None)
+        bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration)
+        return 0
+    from experiments import bench_perception
+
+    load_scenario(args.scenario or "corridor")
+    bench_perception.run_runtime(args.config, args.scenario or "corridor", seconds=args.seconds if args.seconds else 6.0,
+                                 json_out=args.json)
+    return 0
 
 
 def _cmd_scenarios(args) -> int:
@@ -72,9 +93,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_simulate)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=("sim",))
-    b.add_argument("--scenario", default="corridor")
-    b.add_argument("--seconds", type=float, default=10.0, help="simulated seconds for the real-time figure")
+    b.add_argument("what", choices=("sim", "perception", "runtime"),
+                   help="sim: render/physics/real-time; perception: Table I; runtime: Table II")
+    b.add_argument("--scenario", default=None, help="sim, runtime: the scenario (default corridor)")
+    b.add_argument("--seconds", type=float, default=10.0, help="simulated seconds (sim: real-time figure; runtime: frames)")
+    b.add_argument("--out", default="runs/bench_perception", help="perception: output folder")
+    b.add_argument("--seeds", type=int, default=1, help="perception: seeds 0..N-1 per scenario")
+    b.add_argument("--scenarios", default=None, help="perception: comma-separated scenarios")
+    b.add_argument("--configs", default=None, help="perception: comma-separated configurations")
+    b.add_argument("--duration", type=float, default=None, help="perception: seconds per scenario")
+    b.add_argument("--quick", action="store_true", help="perception: 6 s per scenario")
+    b.add_argument("--config", default="dodt", help="runtime: the configuration")
     b.add_argument("--frames", type=int, default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     b.set_defaults(func=_cmd_bench)

@@ -1,0 +1,238 @@
+"""`dodt-nav bench perception` and `dodt-nav bench runtime`: the paper's Tables I and II.
+
+Perception: every configuration (dodt.presets) runs on the same simulated frames of the
+perception scenarios (camera carried along scripted paths, or mounted on the flying drone, D435i
+noise on) and is scored against ground truth (experiments.perception_metrics states the
+matching rule). Writes table.md, table.csv (laid out like Table I, the paper's numbers beside
+ours), per-scenario tables, and plots.
+
+Runtime: the full non-learning pipeline on recorded 640x480 frames, one thread; per-module
+median and p95 milliseconds per frame, laid out like Table II.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dodt.pipeline import DODT, MODULES
+from dodt.presets import PRESETS, preset
+from experiments.perception_metrics import PerceptionMetrics
+from sim import World, load_scenario
+from sim.trajectories import straight_line
+
+SCENARIOS = ("circles", "follow_person", "wall_pass", "partial_obstacle", "static_only", "corridor")
+
+# Table I of the paper (real-world, D435i): position error [m], velocity error [m/s], FP rate [%].
+PAPER_TABLE_I = {
+    "method-1-umap": ("Method I", 0.28, 0.47, None),
+    "method-2-cluster": ("Method II", 0.18, 0.29, 16.4),
+    "method-3-udepth-velocity": ("Method III", 0.19, 0.21, 19.6),
+    "dodt-no-ensemble": ("DODT w/o Ens", 0.17, 0.30, 18.6),
+    "dodt-no-fat": ("DODT w/o FAT", 0.14, 0.29, 6.5),
+    "dodt": ("DODT", 0.11, 0.23, 3.7),
+}
+# Table II of the paper, Intel NUC [ms].
+PAPER_TABLE_II = {"udepth": 3.4, "dbscan": 1.3, "association": 0.03, "kalman": 0.07, "identification": 0.12}
+
+
+def _reference(world: World):
+    """The drone's reference: the scripted path, or the straight flight of the corridor."""
+    sc = world.scenario
+    if sc.camera_path is not None:
+        return lambda t: None
+    at, _ = straight_line(sc.drone.start, sc.drone.goal, sc.drone.cruise_speed)
+    return at
+
+
+def run_scenario(name: str, seed: int, configs: list[str], duration: float | None = None,
+                 record_tracks: bool = False):
+    """Simulate one scenario once and score every configuration on its frames."""
+    sc = load_scenario(name)
+    world = World(sc, seed=seed, segmentation=True)
+    ref = _reference(world)
+    pipes = {c: DODT(preset(c)) for c in configs}
+    metrics = {c: PerceptionMetrics() for c in configs}
+    tracks = {c: [] for c in configs}
+    truth_log = []
+    frame = world.latest_frame()
+    n = int(round((duration or sc.duration) * sc.rates.control))
+    for k in range(n + 1):
+        if frame is not None:
+            truth = world.ground_truth()
+            for c in configs:
+                r = pipes[c].process(frame)
+                metrics[c].add(r, truth, frame.intrinsics)
+                if record_tracks:
+                    tracks[c].append([(o.id, float(o.center[0]), float(o.center[1]), o.dynamic) for o in r.obstacles])
+            if record_tracks:
+                truth_log.append([(o.id, float(o.center[0]), float(o.center[1])) for o in truth.obstacles
+                                  if o.kind == "person"])
+        if k == n:
+            break
+        frame = world.step(ref(world.time))
+    world.close()
+    return metrics, tracks, truth_log
+
+
+def _fmt(x, nd=3):
+    return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:.{nd}f}"
+
+
+def write_tables(out: Path, overall: dict, per_scn: dict) -> str:
+    rows = []
+    for cfg, s in overall.items():
+        paper = PAPER_TABLE_I.get(cfg, (None, None, None, None))
+        rows.append({"configuration": cfg, "paper_row": paper[0] or "",
+                     "pos_err_m": s["pos_err"], "vel_err_mps": s["vel_err"], "fp_rate_pct": 100 * s["fp_rate"],
+                     "recall_pct": 100 * s["recall"], "id_switches": s["id_switches"], "pos_err_3d_m": s["pos_err_3d"],
+                     "paper_pos_err_m": paper[1], "paper_vel_err_mps": paper[2], "paper_fp_rate_pct": paper[3],
+                     "matched": s["matched"], "dynamic_reports": s["dynamic_reports"]})
+    with open(out / "table.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()})
+    lines = ["| Method | Pos. Err. (m) | Vel. Err. (m/s) | FP Rate (%) | Recall 0.5-5 m (%) | ID switches | "
+             "paper Pos. Err. | paper Vel. Err. | paper FP (%) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        name = r["configuration"] + (f" ({r['paper_row']})" if r["paper_row"] else "")
+        lines.append(f"| {name} | {_fmt(r['pos_err_m'])} | {_fmt(r['vel_err_mps'])} | {_fmt(r['fp_rate_pct'], 1)} | "
+                     f"{_fmt(r['recall_pct'], 1)} | {r['id_switches']} | {_fmt(r['paper_pos_err_m'], 2)} | "
+                     f"{_fmt(r['paper_vel_err_mps'], 2)} | {_fmt(r['paper_fp_rate_pct'], 1)} |")
+    lines += ["", "Per scenario (pos. err. m / vel. err. m/s / FP % / recall % / id switches):", "",
+              "| Method | " + " | ".join(per_scn) + " |", "|---|" + "---|" * len(per_scn)]
+    for cfg in overall:
+        cells = []
+        for scn in per_scn:
+            s = per_scn[scn][cfg]
+            cells.append(f"{_fmt(s['pos_err'], 2)} / {_fmt(s['vel_err'], 2)} / {_fmt(100 * s['fp_rate'], 1)} / "
+                         f"{_fmt(100 * s['recall'], 0)} / {s['id_switches']}")
+        lines.append(f"| {cfg} | " + " | ".join(cells) + " |")
+    text = "\n".join(lines) + "\n"
+    (out / "table.md").write_text(text)
+    return text
+
+
+def plot(out: Path, scenario: str, metrics: dict, tracks: dict, truth_log: list) -> None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib is not installed: no plots (pip install matplotlib)")
+        return
+    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for cfg, m in metrics.items():
+        s = np.array(m.series)
+        if len(s):
+            ax[0].plot(s[:, 0], s[:, 1], label=cfg, lw=1)
+            ax[1].plot(s[:, 0], s[:, 2], lw=1)
+    ax[0].set_ylabel("position error [m]")
+    ax[1].set_ylabel("velocity error [m/s]")
+    ax[1].set_xlabel("time [s]")
+    ax[0].legend(fontsize=7, ncol=2)
+    ax[0].set_title(f"{scenario}: errors of dynamic tracks matched to people")
+    fig.tight_layout()
+    fig.savefig(out / f"errors_{scenario}.png", dpi=110)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for pid in {p[0] for frame in truth_log for p in frame}:
+        xy = np.array([(x, y) for frame in truth_log for i, x, y in frame if i == pid])
+        ax.plot(xy[:, 0], xy[:, 1], "k-", lw=3, alpha=0.3)
+    if "dodt" in tracks:
+        by_id: dict = {}
+        for frame in tracks["dodt"]:
+            for tid, x, y, dyn in frame:
+                if dyn:
+                    by_id.setdefault(tid, []).append((x, y))
+        for tid, xy in by_id.items():
+            xy = np.array(xy)
+            ax.plot(xy[:, 0], xy[:, 1], ".", ms=2, label=f"track {tid}" if len(by_id) <= 12 else None)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{scenario}: people (grey) and dodt's dynamic tracks, top-down")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    fig.savefig(out / f"topdown_{scenario}.png", dpi=110)
+    plt.close(fig)
+
+
+def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration: float | None = None) -> dict:
+    configs = list(configs or PRESETS)
+    out.mkdir(parents=True, exist_ok=True)
+    per_scn_metrics: dict = {s: {c: [] for c in configs} for s in scenarios}
+    t0 = time.perf_counter()
+    for scn in scenarios:
+        for i, seed in enumerate(seeds):
+            m, tracks, truth = run_scenario(scn, seed, configs, duration, record_tracks=(i == 0))
+            for c in configs:
+                per_scn_metrics[scn][c].append(m[c])
+            if i == 0:
+                plot(out, scn, m, tracks, truth)
+            print(f"  {scn} seed {seed}: dodt {m['dodt'].summary() if 'dodt' in m else ''}"[:160], flush=True)
+    per_scn = {s: {c: PerceptionMetrics.combine(v) for c, v in d.items()} for s, d in per_scn_metrics.items()}
+    overall = {c: PerceptionMetrics.combine([m for s in scenarios for m in per_scn_metrics[s][c]]) for c in configs}
+    text = write_tables(out, overall, per_scn)
+    (out / "results.json").write_text(json.dumps({"seeds": seeds, "scenarios": list(scenarios), "overall": overall,
+                                                  "per_scenario": per_scn}, indent=1))
+    print(text)
+    print(f"wrote {out}/table.md, table.csv, results.json and plots in {time.perf_counter() - t0:.0f} s")
+    return overall
+
+
+# --------------------------------------------------------------------------- runtime (Table II)
+
+
+def record_frames(scenario: str = "corridor", seconds: float = 6.0, seed: int = 0) -> list:
+    sc = load_scenario(scenario)
+    world = World(sc, seed=seed, segmentation=False)
+    ref = _reference(world)
+    frames = [world.latest_frame()]
+    while world.time < seconds:
+        f = world.step(ref(world.time))
+        if f is not None:
+            frames.append(f)
+    world.close()
+    return frames
+
+
+def run_runtime(config: str = "dodt", scenario: str = "corridor", seconds: float = 6.0, repeats: int = 3,
+                json_out: Path | None = None) -> dict:
+    import cv2
+
+    cv2.setNumThreads(1)  # single-threaded, as the paper's table
+    frames = record_frames(scenario, seconds)
+    per = {m: [] for m in MODULES + ("total",)}
+    for rep in range(repeats + 1):
+        pipe = DODT(preset(config))
+        for f in frames:
+            r = pipe.process(f)
+            if rep > 0:  # the first pass compiles and warms up
+                for m in per:
+                    per[m].append(r.timings_ms[m])
+    res = {m: {"median_ms": float(np.median(v)), "p95_ms": float(np.percentile(v, 95))} for m, v in per.items()}
+    K = frames[0].intrinsics
+    print(f"Runtime of '{config}' per frame, {K.width}x{K.height}, one thread, {len(frames)} frames of {scenario} "
+          f"x {repeats} passes")
+    print(f"| {'module':<22} | {'median (ms)':>11} | {'p95 (ms)':>8} | {'paper, Intel NUC (ms)':>21} |")
+    print(f"|{'-' * 24}|{'-' * 13}|{'-' * 10}|{'-' * 23}|")
+    names = {"point_cloud": "point cloud + voxel", "udepth": "U-depth detection", "dbscan": "DBSCAN detection",
+             "ensemble": "ensemble fusion", "association": "data association", "kalman": "Kalman filter tracking",
+             "identification": "dynamic obstacle id.", "total": "total (no learned det.)"}
+    for m in MODULES + ("total",):
+        paper = PAPER_TABLE_II.get(m)
+        if m == "total":
+            paper = 19.12 - 14.3  # the paper's total without YOLO-MAD
+        print(f"| {names[m]:<22} | {res[m]['median_ms']:>11.2f} | {res[m]['p95_ms']:>8.2f} | "
+              f"{(f'{paper:.2f}' if paper is not None else '-'):>21} |")
+    if json_out:
+        Path(json_out).write_text(json.dumps(res, indent=1))
+    return res
