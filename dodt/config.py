@@ -116,6 +116,11 @@ class IdentificationConfig:
     vote_velocity: float = 0.15  # m/s, T_vote per point, ref
     vote_ratio: float = 0.8  # T_ratio, ref dynamic_voting_threshold
     max_skip_ratio: float = 0.5  # ref maximum_skip_ratio
+    max_point_speed: float = 2.5  # m/s; farther nearest neighbours are no correspondence (ours)
+    range_margin: float = 0.5  # m; points this close to depth_max back then are not voted on (ours)
+    # px; points that were this close to the image border back then are not voted on: the cloud
+    # skips the border (depth margin 10 px), and an edge of the view cuts obstacles (ours)
+    fov_margin_px: float = 15.0
     consistency: int = 3  # consecutive candidate frames to become dynamic, ref default
     force_dynamic_window: int = 30  # ref frames_force_dynamic_check_range
     force_dynamic_count: int = 10  # ref frames_force_dynamic

@@ -2,11 +2,13 @@
 
 Per track and frame, a candidate test:
 1. the filtered horizontal speed must reach T_vel;
-2. point voting: each current point is matched to its nearest neighbour in the track's cloud k
-   frames back; its velocity (horizontal) votes dynamic when above T_vote. Points are left out
+2. point voting: each current point is matched to its nearest neighbour in the cloud k frames
+   back (the whole filtered cloud: see ``vote``); its velocity (horizontal) votes dynamic when above T_vote. Points are left out
    of the vote when their velocity points against the box's (angle >= 90 deg, an invalid match)
    or when they were outside the camera's view k frames back (newly seen parts of an obstacle,
-   the paper's Fig. 8); too many left out and the frame says nothing;
+   the paper's Fig. 8), or had no plausible match back then (ours: nearest neighbour farther
+   than a person walks, or the point was near the end of the depth range); too many left out
+   and the frame says nothing;
 3. candidate if votes / valid points >= T_ratio.
 A track is dynamic once the last ``consistency`` frames were candidates, and stays dynamic while
 at least ``force_dynamic_count`` of the last ``force_dynamic_window`` frames were dynamic. A
@@ -22,15 +24,27 @@ from dodt.frames import CameraIntrinsics
 from dodt.geometry import in_field_of_view
 
 
-def vote(points_now: np.ndarray, points_then: np.ndarray, dt: float, v_box: np.ndarray, T_world_camera_then,
+def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_world_camera_then,
          K: CameraIntrinsics, max_depth: float, cfg: IdentificationConfig) -> tuple[int, int, int]:
-    """(votes, valid, skipped) of the point voting."""
+    """(votes, valid, skipped) of the point voting.
+
+    ``cloud_then`` is a k-d tree (or an (M, 3) array) of the whole filtered cloud k frames back.
+    Matching against the whole cloud, not only the track's own points back then, keeps a
+    static obstacle static when its box grows (more of it seen, or split from a neighbour):
+    its points find their unmoved twins wherever they were.
+    """
     n = len(points_now)
-    if n == 0 or len(points_then) == 0 or dt <= 0:
+    if not isinstance(cloud_then, cKDTree):
+        cloud_then = cKDTree(np.asarray(cloud_then).reshape(-1, 3)) if len(cloud_then) else None
+    if n == 0 or cloud_then is None or dt <= 0:
         return 0, 0, n
-    seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth, margin_px=2.0)
-    _, idx = cKDTree(points_then).query(points_now)
-    v = (points_now - points_then[idx])[:, :2] / dt
+    # In view back then, and not at the edge of the depth range, where the filtered cloud thins out.
+    seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth - cfg.range_margin, margin_px=cfg.fov_margin_px)
+    dist, idx = cloud_then.query(points_now)
+    # A nearest neighbour farther than anything walks in dt is no correspondence: that surface
+    # was not in the cloud back then (occluded, too sparse, out of range).
+    seen &= dist <= cfg.max_point_speed * dt + 0.1
+    v = (points_now - cloud_then.data[idx])[:, :2] / dt
     vb = v_box[:2]
     agree = (v @ vb) > 0 if np.linalg.norm(vb) > 1e-9 else np.ones(n, bool)
     valid = seen & agree

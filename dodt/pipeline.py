@@ -20,6 +20,7 @@ import time
 from collections import deque
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from dodt.config import DODTConfig
 from dodt.dbscan import DBSCANDetector
@@ -43,11 +44,15 @@ def validate_frame(frame: SensorFrame) -> None:
         raise ValueError(f"depth must be a 2-D array, got {type(d).__name__} with shape {getattr(d, 'shape', None)}")
     if d.dtype not in (np.uint16, np.float32, np.float64):
         raise ValueError(f"depth must be uint16 millimetres or float32/float64 metres, got dtype {d.dtype}")
+    if K.width < 16 or K.height < 16:
+        raise ValueError(f"images must be at least 16x16 pixels, the intrinsics say {K.width}x{K.height}")
     if d.shape != (K.height, K.width):
         raise ValueError(f"depth image is {d.shape[1]}x{d.shape[0]} but the intrinsics are for "
                          f"{K.width}x{K.height}")
     if not (math.isfinite(K.fx) and math.isfinite(K.fy) and K.fx > 0 and K.fy > 0):
         raise ValueError(f"intrinsics fx, fy must be finite and positive, got {K.fx}, {K.fy}")
+    if not (math.isfinite(K.cx) and math.isfinite(K.cy)):
+        raise ValueError(f"intrinsics cx, cy must be finite, got {K.cx}, {K.cy}")
     if frame.color is not None:
         c = frame.color
         if not isinstance(c, np.ndarray) or c.shape != (K.height, K.width, 3) or c.dtype != np.uint8:
@@ -56,6 +61,11 @@ def validate_frame(frame: SensorFrame) -> None:
     T = np.asarray(frame.T_world_camera)
     if T.shape != (4, 4):
         raise ValueError(f"T_world_camera must be 4x4, got shape {T.shape}")
+    if np.all(np.isfinite(T)):  # a non-finite pose is bad data (skipped and counted), not an error
+        if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+            raise ValueError(f"T_world_camera's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
+        if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-3):
+            raise ValueError("T_world_camera's rotation is not orthonormal")
 
 
 class DODT:
@@ -68,6 +78,7 @@ class DODT:
         self.tracker = Tracker(self.cfg)
         self.last_stamp: float | None = None
         self.poses: dict[int, np.ndarray] = {}
+        self.clouds: dict[int, object] = {}  # seq -> k-d tree of that frame's filtered cloud
         self._pose_order: deque[int] = deque()
         self.counters = {"frames": 0, "skipped_bad_pose": 0, "skipped_time": 0, "restarted_after_gap": 0,
                          "bad_pixels": 0, "frames_with_bad_pixels": 0}
@@ -77,6 +88,7 @@ class DODT:
         self.tracker.reset()
         self.last_stamp = None
         self.poses.clear()
+        self.clouds.clear()
         self._pose_order.clear()
 
     # ------------------------------------------------------------------ helpers
@@ -141,8 +153,8 @@ class DODT:
         if not math.isfinite(stamp) or (self.last_stamp is not None and stamp <= self.last_stamp):
             return self._skip(frame, "skipped_time", n_bad)
         dt = 0.0 if self.last_stamp is None else stamp - self.last_stamp
-        if dt > self.cfg.track.coast_time:
-            self.tracker.reset()  # everything may have moved: start again
+        if dt > max(self.cfg.depth.max_frame_gap, self.cfg.track.coast_time):
+            self.tracker.reset()  # frames were lost for longer than tracks survive: start again
             self.counters["restarted_after_gap"] += 1
             dt = 0.0
         self.last_stamp = stamp
@@ -151,11 +163,16 @@ class DODT:
         self.poses[seq] = T
         self._pose_order.append(seq)
         while len(self._pose_order) > self.cfg.identification.frame_skip + 1:
-            self.poses.pop(self._pose_order.popleft(), None)
+            old = self._pose_order.popleft()
+            self.poses.pop(old, None)
+            self.clouds.pop(old, None)
 
         t0 = time.perf_counter()
         points = self.cloud(depth_m, frame.intrinsics, T)
         t_cloud = (time.perf_counter() - t0) * 1e3
+        t0 = time.perf_counter()
+        self.clouds[seq] = cKDTree(points) if len(points) else None
+        t_tree = (time.perf_counter() - t0) * 1e3
         dets, debug = self._detect(frame, depth_m, T, points)
 
         t0 = time.perf_counter()
@@ -167,10 +184,10 @@ class DODT:
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T, (self.cfg.depth.depth_min, self.cfg.depth.depth_max))
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
-            tr.identify(seq, self.poses, frame.intrinsics, self.cfg.depth.depth_max)
+            tr.identify(seq, self.poses, self.clouds, frame.intrinsics, self.cfg.depth.depth_max)
         t3 = time.perf_counter()
         timings = {"point_cloud": t_cloud, **debug["timings"], "association": (t1 - t0) * 1e3,
-                   "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3,
+                   "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3 + t_tree,
                    "total": (t3 - t_start) * 1e3}
         boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]] for k in ("udepth", "dbscan", "ensemble")}
         return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),

@@ -28,7 +28,7 @@ class _Observation:
     seq: int
     stamp: float
     center: np.ndarray
-    velocity: np.ndarray  # pseudo-measured velocity at this observation
+    velocity: np.ndarray | None  # pseudo-measured velocity at this observation (None: the first one)
 
 
 class Track:
@@ -43,7 +43,7 @@ class Track:
         self.det_size = det.size.copy()  # the latest detection's, for association
         self.count, self.spread = features(det)
         self.observations: deque[_Observation] = deque(maxlen=cfg.kalman.averaging_frames + 1)
-        self.observations.append(_Observation(seq, stamp, det.center.copy(), np.zeros(2)))
+        self.observations.append(_Observation(seq, stamp, det.center.copy(), None))
         self.clouds: deque[tuple[int, float, np.ndarray]] = deque(maxlen=cfg.identification.frame_skip + 1)
         self.clouds.append((seq, stamp, det.points))
         self.history: deque[tuple[float, float, float, float]] = deque(maxlen=cfg.track.history)
@@ -68,11 +68,11 @@ class Track:
         dt = stamp - prev.stamp
         if dt > 1e-6:
             v = (det.center[:2] - prev.center[:2]) / dt
-            a = (v - prev.velocity) / dt
         else:
-            v, a = np.zeros(2), np.zeros(2)
-        if len(obs) == 1:  # one earlier observation: no velocity estimate to difference yet
-            a = np.zeros(2)
+            v = self.kf.velocity.copy()
+        # Acceleration needs a velocity measured back then; until there is one, measure none
+        # (the filter's own estimate, so the update adds no innovation there).
+        a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
         self.kf.update(np.array([det.center[0], det.center[1], v[0], v[1], a[0], a[1]]))
         self.observations.append(_Observation(seq, stamp, det.center.copy(), v))
         self.z = float(det.center[2])
@@ -89,7 +89,7 @@ class Track:
         self.is_person = self.is_person or det.is_person
         self.coasting = False
 
-    def identify(self, seq: int, poses: dict, K: CameraIntrinsics, max_depth: float) -> None:
+    def identify(self, seq: int, poses: dict, clouds: dict, K: CameraIntrinsics, max_depth: float) -> None:
         cfg = self.cfg.identification
         if self.is_person:
             cand = True
@@ -105,10 +105,10 @@ class Track:
             if old and cfg.method != "velocity":
                 o_seq, o_t, o_pts = old[0]
                 T_then = poses.get(o_seq)
-                center_then = np.mean(o_pts, axis=0) if len(o_pts) else None
-                if T_then is not None and center_then is not None:
-                    v_box = (np.mean(cur_pts, axis=0) - center_then) / max(cur_t - o_t, 1e-6) if len(cur_pts) else np.zeros(3)
-                    votes, valid, skipped = vote(cur_pts, o_pts, cur_t - o_t, v_box, T_then, K, max_depth, cfg)
+                tree_then = clouds.get(o_seq)
+                if T_then is not None and tree_then is not None and len(o_pts) and len(cur_pts):
+                    v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(cur_t - o_t, 1e-6)
+                    votes, valid, skipped = vote(cur_pts, tree_then, cur_t - o_t, v_box, T_then, K, max_depth, cfg)
             cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
         self.candidates.append(cand)
         self.dynamic = bool(self.is_person or decide(list(self.candidates), list(self.dynamic_history), cfg))

@@ -359,10 +359,6 @@ def test_fallback_stage_matches_a_changed_shape_nearby_but_not_another_size():
     assert t2.associate([changed], CAMERA) == []
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "bug: Track.update differences the pseudo-velocity against the birth observation's "
-    "placeholder velocity (zeros) for frames 2..averaging_frames, a spurious acceleration that "
-    "makes the CA filter overshoot a constant 1 m/s to 1.31 m/s"))
 def test_constant_velocity_target_does_not_overshoot():
     cfg = DODTConfig(kalman=KalmanConfig(model="ca"))
     feed = Feed(cfg)
