@@ -121,7 +121,10 @@ class IdentificationConfig:
     # px; points that were this close to the image border back then are not voted on: the cloud
     # skips the border (depth margin 10 px), and an edge of the view cuts obstacles (ours)
     fov_margin_px: float = 15.0
-    consistency: int = 3  # consecutive candidate frames to become dynamic, ref default
+    # consecutive candidate frames to become dynamic: ref default 3, the authors' navigation
+    # configuration 5 (autonomous_flight cfg/dynamic_navigation), which we use: 3 let a side wall
+    # seen at a grazing angle from the flying drone blink dynamic for a few frames
+    consistency: int = 5
     force_dynamic_window: int = 30  # ref frames_force_dynamic_check_range
     force_dynamic_count: int = 10  # ref frames_force_dynamic
     constrain_size: bool = False  # ref constrain_size: dynamic only if about person-sized

@@ -90,19 +90,21 @@ def write_tables(out: Path, overall: dict, per_scn: dict) -> str:
                      "pos_err_m": s["pos_err"], "vel_err_mps": s["vel_err"], "fp_rate_pct": 100 * s["fp_rate"],
                      "recall_pct": 100 * s["recall"], "id_switches": s["id_switches"], "pos_err_3d_m": s["pos_err_3d"],
                      "paper_pos_err_m": paper[1], "paper_vel_err_mps": paper[2], "paper_fp_rate_pct": paper[3],
-                     "matched": s["matched"], "dynamic_reports": s["dynamic_reports"]})
+                     "matched": s["matched"], "dynamic_reports": s["dynamic_reports"],
+                     "duplicate_pct": 100 * s["duplicates"] / max(s["dynamic_reports"], 1)})
     with open(out / "table.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         for r in rows:
             w.writerow({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()})
     lines = ["| Method | Pos. Err. (m) | Vel. Err. (m/s) | FP Rate (%) | Recall 0.5-5 m (%) | ID switches | "
-             "paper Pos. Err. | paper Vel. Err. | paper FP (%) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "Duplicates (%) | paper Pos. Err. | paper Vel. Err. | paper FP (%) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         name = r["configuration"] + (f" ({r['paper_row']})" if r["paper_row"] else "")
         lines.append(f"| {name} | {_fmt(r['pos_err_m'])} | {_fmt(r['vel_err_mps'])} | {_fmt(r['fp_rate_pct'], 1)} | "
-                     f"{_fmt(r['recall_pct'], 1)} | {r['id_switches']} | {_fmt(r['paper_pos_err_m'], 2)} | "
+                     f"{_fmt(r['recall_pct'], 1)} | {r['id_switches']} | {_fmt(r['duplicate_pct'], 1)} | "
+                     f"{_fmt(r['paper_pos_err_m'], 2)} | "
                      f"{_fmt(r['paper_vel_err_mps'], 2)} | {_fmt(r['paper_fp_rate_pct'], 1)} |")
     lines += ["", "Per scenario (pos. err. m / vel. err. m/s / FP % / recall % / id switches):", "",
               "| Method | " + " | ".join(per_scn) + " |", "|---|" + "---|" * len(per_scn)]

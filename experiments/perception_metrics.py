@@ -7,7 +7,8 @@ a pair counting only within ``match_distance`` (0.5 m).
   the 3D centre error is reported beside it);
 - velocity error: mean norm of the horizontal velocity difference of matched pairs [m/s];
 - false-positive rate (the paper's definition, static obstacles reported dynamic over all
-  detections): dynamic reports matched to no person over all dynamic reports;
+  detections): dynamic reports farther than ``match_distance`` from every person, over all
+  dynamic reports; a second dynamic track on a person (a duplicate) is counted apart;
 - recall: people walking (> 0.1 m/s) within 0.5-5 m of the camera and visible (at least
   ``min_visible_px`` pixels in the segmentation, or, without segmentation, centre in view)
   that are matched by a dynamic track, over all such people;
@@ -34,6 +35,7 @@ class PerceptionMetrics:
     vel_err: list = field(default_factory=list)
     dynamic_reports: int = 0
     false_dynamic: int = 0
+    duplicates: int = 0
     visible_people: int = 0
     recalled_people: int = 0
     id_switches: int = 0
@@ -53,7 +55,13 @@ class PerceptionMetrics:
             cost = np.linalg.norm(a[:, None] - b[None], axis=2)
             r, c = linear_sum_assignment(cost)
             pairs = [(i, j) for i, j in zip(r, c) if cost[i, j] <= self.match_distance]
-        self.false_dynamic += len(dyn) - len(pairs)
+        for i, o in enumerate(dyn):
+            if i in {a for a, _ in pairs}:
+                continue
+            if people and min(np.linalg.norm(o.center[:2] - p.center[:2]) for p in people) <= self.match_distance:
+                self.duplicates += 1
+            else:
+                self.false_dynamic += 1
         fe, fv = [], []
         matched_people = {}
         for i, j in pairs:
@@ -90,7 +98,7 @@ class PerceptionMetrics:
                 "fp_rate": self.false_dynamic / self.dynamic_reports if self.dynamic_reports else 0.0,
                 "recall": self.recalled_people / self.visible_people if self.visible_people else float("nan"),
                 "id_switches": self.id_switches, "matched": len(self.pos_err), "dynamic_reports": self.dynamic_reports,
-                "false_dynamic": self.false_dynamic, "visible_people": self.visible_people, "frames": self.frames}
+                "false_dynamic": self.false_dynamic, "duplicates": self.duplicates, "visible_people": self.visible_people, "frames": self.frames}
 
     @staticmethod
     def combine(parts: list["PerceptionMetrics"]) -> dict:
@@ -99,7 +107,8 @@ class PerceptionMetrics:
             m.pos_err += p.pos_err
             m.pos_err_3d += p.pos_err_3d
             m.vel_err += p.vel_err
-            for k in ("dynamic_reports", "false_dynamic", "visible_people", "recalled_people", "id_switches", "frames"):
+            for k in ("dynamic_reports", "false_dynamic", "duplicates", "visible_people", "recalled_people",
+                      "id_switches", "frames"):
                 setattr(m, k, getattr(m, k) + getattr(p, k))
         return m.summary()
 
