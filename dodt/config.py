@@ -98,6 +98,10 @@ class KalmanConfig:
     # pseudo-measurements span up to this many frames: ref 10; ours 15 (0.5 s), which cut the
     # velocity error on our scenarios from 0.32 to 0.26 m/s
     averaging_frames: int = 15
+    # paper: position, velocity and acceleration "measured" (pseudo-measurements, H = I);
+    # position: only the position is measured and the model's white noise (q_white) drives it
+    measurement: str = "paper"
+    q_white: float = 4.0  # (m/s^3)^2 s for CA, (m/s^2)^2 s for CV, with measurement = "position"
 
 
 @dataclass(frozen=True)

@@ -39,18 +39,45 @@ class KalmanFilter:
             F[2, 4] = F[3, 5] = dt
         return F
 
+    def Q_for(self, dt: float) -> np.ndarray:
+        """Process noise: the reference code's constant diagonal Q, or, with
+        ``measurement = "position"``, the discretised white-jerk (CA) or white-acceleration (CV)
+        model with spectral density q (Bar-Shalom, Li, Kirubarajan 2001, Sec. 6.2-6.3)."""
+        if self.cfg.measurement != "position":
+            return self.Q
+        q = self.cfg.q_white
+        if self.ca:
+            blk = q * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+                                [dt**3 / 6, dt**2 / 2, dt]])
+        else:
+            blk = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+        Q = np.zeros((self.n, self.n))
+        m = blk.shape[0]
+        for a in range(2):  # x and y, interleaved as [x, y, vx, vy, ax, ay]
+            idx = [a + 2 * i for i in range(m)]
+            Q[np.ix_(idx, idx)] = blk
+        return Q
+
     def predict(self, dt: float) -> None:
         F = self.F(dt)
         self.x = F @ self.x
-        self.P = F @ self.P @ F.T + self.Q
+        self.P = F @ self.P @ F.T + self.Q_for(dt)
 
     def update(self, z: np.ndarray) -> None:
-        z = np.asarray(z, float)[: self.n]
-        y = z - self.H @ self.x
-        S = self.H @ self.P @ self.H.T + self.R
-        K = np.linalg.solve(S, self.H @ self.P).T  # P H^T S^-1 (S symmetric)
+        """Update with z = [x, y, vx, vy, (ax, ay)], or only [x, y] when measuring position."""
+        z = np.asarray(z, float)
+        if self.cfg.measurement == "position":
+            H = self.H[:2]
+            R = self.R[:2, :2]
+            z = z[:2]
+        else:
+            H, R = self.H, self.R
+            z = z[: self.n]
+        y = z - H @ self.x
+        S = H @ self.P @ H.T + R
+        K = np.linalg.solve(S, H @ self.P).T  # P H^T S^-1 (S symmetric)
         self.x = self.x + K @ y
-        self.P = (np.eye(self.n) - K @ self.H) @ self.P
+        self.P = (np.eye(self.n) - K @ H) @ self.P
 
     @property
     def position(self) -> np.ndarray:

@@ -293,3 +293,17 @@ def test_state_stays_finite_through_long_predictions(model):
     assert np.all(np.isfinite(kf.x)) and np.all(np.isfinite(kf.P))
     # after a long prediction the filter trusts the new position almost entirely
     np.testing.assert_allclose(kf.position, [100.0, -50.0], atol=0.5)
+
+
+def test_position_only_measurement_option_tracks_a_constant_velocity_target():
+    # measurement = "position": only x, y are measured; the white-jerk model carries velocity
+    cfg = KalmanConfig(model="ca", measurement="position", q_white=1.0, r_pos=0.01)
+    kf = KalmanFilter(cfg, np.array([0.0, 0.0]))
+    rng = np.random.default_rng(0)
+    dt = 1 / 30
+    for k in range(1, 181):
+        kf.predict(dt)
+        t = k * dt
+        kf.update(np.array([1.0 * t, -0.5 * t]) + rng.normal(0, 0.03, 2))
+    np.testing.assert_allclose(kf.velocity, [1.0, -0.5], atol=0.15)
+    assert kf.Q_for(dt)[0, 0] == pytest.approx(1.0 * dt**5 / 20)
