@@ -188,6 +188,48 @@ class WalkPath:
         return math.atan2(dy, dx)
 
 
+TURN_RADIUS = 0.4  # m: people turn along arcs, not on the spot (the path stays continuous in heading)
+
+
+def round_corners(points: np.ndarray, radius: float = TURN_RADIUS, step_deg: float = 10.0) -> np.ndarray:
+    """Replace each corner of a polyline by a circular arc tangent to both legs.
+
+    The arc's radius is ``radius``, or less for sharp turns and short legs (the arc starts at
+    most ``radius`` and half a leg before the corner), so a walker's velocity turns smoothly
+    instead of jumping at waypoints.
+    """
+    pts = np.asarray(points, float)
+    if len(pts) < 3:
+        return pts
+    out = [pts[0]]
+    for i in range(1, len(pts) - 1):
+        a, b, c = pts[i - 1], pts[i], pts[i + 1]
+        u, w = b - a, c - b
+        lu, lw = np.linalg.norm(u), np.linalg.norm(w)
+        if lu < 1e-9 or lw < 1e-9:
+            continue
+        u, w = u / lu, w / lw
+        turn = math.acos(max(-1.0, min(1.0, float(u @ w))))
+        if turn < 1e-3 or turn > math.pi - 1e-3:
+            out.append(b)
+            continue
+        # distance from the corner to the arc's ends: a sharp turn is made on a tighter arc, so
+        # that the walker still reaches (nearly) its waypoint
+        cut = min(radius * math.tan(turn / 2), radius, 0.5 * lu, 0.5 * lw)
+        r = cut / math.tan(turn / 2)
+        p0 = b - u * cut
+        left = u[0] * w[1] - u[1] * w[0] > 0
+        normal = np.array([-u[1], u[0]]) if left else np.array([u[1], -u[0]])
+        centre = p0 + normal * r
+        a0 = math.atan2(p0[1] - centre[1], p0[0] - centre[0])
+        n = max(2, int(math.ceil(math.degrees(turn) / step_deg)) + 1)
+        for k in range(n):
+            ang = a0 + (turn if left else -turn) * k / (n - 1)
+            out.append(centre + r * np.array([math.cos(ang), math.sin(ang)]))
+    out.append(pts[-1])
+    return np.array(out)
+
+
 def _segment_clear(a, b, scenario: Scenario, margin: float) -> bool:
     n = max(2, int(np.linalg.norm(b - a) / 0.05) + 1)
     pts = a + np.linspace(0, 1, n)[:, None] * (b - a)
@@ -199,7 +241,7 @@ def plan_path(person: Person, scenario: Scenario, rng: np.random.Generator, hori
     need = person.speed * max(horizon - person.start_delay, 0.0) + 1.0
     if person.behaviour in ("waypoint_loop", "circle"):
         loop = np.array(person.waypoints if person.behaviour == "waypoint_loop"
-                        else circle_waypoints(person.center, person.radius, person.clockwise))
+                        else circle_waypoints(person.center, person.radius, person.clockwise, n=72))
         closed = np.vstack([loop, loop[:1]])
         per = np.sum(np.linalg.norm(np.diff(closed, axis=0), axis=1))
         reps = int(math.ceil(need / per)) + 1
@@ -225,7 +267,7 @@ def plan_path(person: Person, scenario: Scenario, rng: np.random.Generator, hori
         cur = np.array(person.start) if person.start is not None else sample()
         pts_list, total = [cur], 0.0
         min_leg = min(1.0, 0.5 * float(np.linalg.norm(hi - lo)))
-        while total < need:
+        while total < 1.3 * need + 2.0:  # margin for the length the rounded corners cut
             for _ in range(200):
                 goal = sample()
                 if np.linalg.norm(goal - cur) >= min_leg and _segment_clear(cur, goal, scenario, PERSON_RADIUS):
@@ -236,7 +278,7 @@ def plan_path(person: Person, scenario: Scenario, rng: np.random.Generator, hori
             pts_list.append(goal)
             cur = goal
         pts = np.array(pts_list) if len(pts_list) > 1 else np.array([cur, cur + 1e-3])
-    return WalkPath(points=pts.astype(float), speed=person.speed, start_delay=person.start_delay)
+    return WalkPath(points=round_corners(pts.astype(float)), speed=person.speed, start_delay=person.start_delay)
 
 
 def person_height(person: Person, rng: np.random.Generator) -> float:
