@@ -63,16 +63,26 @@ class KalmanFilter:
         self.x = F @ self.x
         self.P = F @ self.P @ F.T + self.Q_for(dt)
 
-    def update(self, z: np.ndarray) -> None:
-        """Update with z = [x, y, vx, vy, (ax, ay)], or only [x, y] when measuring position."""
+    def update(self, z: np.ndarray, window: float = 1.0) -> None:
+        """Update with z = [x, y, vx, vy, (ax, ay)], or only [x, y] when measuring position.
+
+        ``window`` in (0, 1]: the pseudo-measurements' span over the full averaging window. A
+        finite difference over a fraction w of it is 1/w times noisier in velocity and 1/w^2 in
+        acceleration, so their R entries grow by 1/w^2 and 1/w^4 (ours: the reference code
+        uses one R from the first frame on, and a young track overshoots).
+        """
         z = np.asarray(z, float)
         if self.cfg.measurement == "position":
             H = self.H[:2]
             R = self.R[:2, :2]
             z = z[:2]
         else:
-            H, R = self.H, self.R
+            H, R = self.H, self.R.copy()
             z = z[: self.n]
+            w = min(max(window, 1e-3), 1.0)
+            R[2:4, 2:4] /= w * w
+            if self.ca:
+                R[4:6, 4:6] /= w**4
         y = z - H @ self.x
         S = H @ self.P @ H.T + R
         K = np.linalg.solve(S, H @ self.P).T  # P H^T S^-1 (S symmetric)

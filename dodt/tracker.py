@@ -31,11 +31,21 @@ class _Observation:
     velocity: np.ndarray | None  # pseudo-measured velocity at this observation (None: the first one)
 
 
+def _anchor(det: Detection, source: str) -> np.ndarray:
+    """The horizontal point the filter measures: the box centre, or the median of the
+    obstacle's points (steadier: swinging limbs move the box more than the body)."""
+    if source == "points" and len(det.points) >= 10:
+        return np.median(det.points[:, :2], axis=0).astype(float)
+    return det.center[:2].astype(float)
+
+
 class Track:
     def __init__(self, tid: int, det: Detection, seq: int, stamp: float, cfg: DODTConfig):
         self.id = tid
         self.cfg = cfg
-        self.kf = KalmanFilter(cfg.kalman, det.center)
+        anchor = _anchor(det, cfg.kalman.position_source)
+        self.offset = det.center[:2] - anchor  # box centre relative to the measured point
+        self.kf = KalmanFilter(cfg.kalman, anchor)
         self.born = stamp
         self.last_seen = stamp
         self.z = float(det.center[2])
@@ -43,7 +53,7 @@ class Track:
         self.det_size = det.size.copy()  # the latest detection's, for association
         self.count, self.spread = features(det)
         self.observations: deque[_Observation] = deque(maxlen=cfg.kalman.averaging_frames + 1)
-        self.observations.append(_Observation(seq, stamp, det.center.copy(), None))
+        self.observations.append(_Observation(seq, stamp, anchor.copy(), None))
         self.clouds: deque[tuple[int, float, np.ndarray]] = deque(maxlen=cfg.identification.frame_skip + 1)
         self.clouds.append((seq, stamp, det.points))
         self.history: deque[tuple[float, float, float, float]] = deque(maxlen=cfg.track.history)
@@ -56,8 +66,12 @@ class Track:
         self.coasting = False
         self.missed = 0  # consecutive frames without a detection
 
+    @property
+    def center_xy(self) -> np.ndarray:
+        return self.kf.position + self.offset
+
     def view(self) -> TrackView:
-        c = np.array([self.kf.position[0], self.kf.position[1], self.z])
+        c = np.array([*self.center_xy, self.z])
         return TrackView(center=c, size=self.det_size, count=self.count, spread=self.spread,
                          position_variance=self.kf.position_variance)
 
@@ -66,15 +80,18 @@ class Track:
         obs = list(self.observations)
         prev = obs[max(0, len(obs) - k.averaging_frames)]  # up to averaging_frames back
         dt = stamp - prev.stamp
+        anchor = _anchor(det, k.position_source)
+        self.offset = 0.7 * self.offset + 0.3 * (det.center[:2] - anchor)
         if dt > 1e-6:
-            v = (det.center[:2] - prev.center[:2]) / dt
+            v = (anchor - prev.center[:2]) / dt
         else:
             v = self.kf.velocity.copy()
         # Acceleration needs a velocity measured back then; until there is one, measure none
         # (the filter's own estimate, so the update adds no innovation there).
         a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
-        self.kf.update(np.array([det.center[0], det.center[1], v[0], v[1], a[0], a[1]]))
-        self.observations.append(_Observation(seq, stamp, det.center.copy(), v))
+        window = (len(obs) - obs.index(prev)) / k.averaging_frames  # frames spanned / full window
+        self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window)
+        self.observations.append(_Observation(seq, stamp, anchor.copy(), v))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
         # which then cannot follow a person whose box changes as they turn or swing their arms).
@@ -117,7 +134,7 @@ class Track:
     def output(self, stamp: float) -> TrackedObstacle:
         h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
         return TrackedObstacle(
-            id=self.id, center=np.array([self.kf.position[0], self.kf.position[1], self.z]), size=self.size.copy(),
+            id=self.id, center=np.array([*self.center_xy, self.z]), size=self.size.copy(),
             velocity=np.array([self.kf.velocity[0], self.kf.velocity[1], 0.0]),
             acceleration=np.array([self.kf.acceleration[0], self.kf.acceleration[1], 0.0]),
             dynamic=self.dynamic, coasting=self.coasting, age=stamp - self.born,
@@ -150,7 +167,7 @@ class Tracker:
         H, W = depth_m.shape
         for tr in self.tracks:
             if tr.coasting and tr.missed >= 3:
-                c = np.array([tr.kf.position[0], tr.kf.position[1], tr.z]) - t
+                c = np.array([*tr.center_xy, tr.z]) - t
                 pc = c @ R
                 if depth_range[0] <= pc[2] <= depth_range[1]:
                     half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
@@ -207,7 +224,8 @@ class Tracker:
                 tr.coasting = True
                 tr.missed += 1
             survivors.append(tr)
-            tr.history.append((stamp, float(tr.kf.position[0]), float(tr.kf.position[1]), tr.z))
+            c = tr.center_xy
+            tr.history.append((stamp, float(c[0]), float(c[1]), tr.z))
         for di, det in enumerate(dets):
             if di not in matched_d:
                 survivors.append(Track(self._next_id, det, seq, stamp, self.cfg))

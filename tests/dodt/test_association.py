@@ -360,7 +360,9 @@ def test_fallback_stage_matches_a_changed_shape_nearby_but_not_another_size():
 
 
 def test_constant_velocity_target_does_not_overshoot():
-    cfg = DODTConfig(kalman=KalmanConfig(model="ca"))
+    # Box centres measured (exact here), so that only the pseudo-measurements' construction is
+    # tested: no spurious acceleration from a velocity that was never measured.
+    cfg = DODTConfig(kalman=KalmanConfig(model="ca", position_source="box"))
     feed = Feed(cfg)
     speeds = []
     for k in range(40):

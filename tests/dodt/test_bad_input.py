@@ -176,7 +176,8 @@ def test_uint16_millimetre_depth_matches_float_metres():
         assert r_mm.bad_pixels == 0
         assert len(r_mm.obstacles) == len(r_m.obstacles) >= 1
         for a, b in zip(r_mm.obstacles, r_m.obstacles):
-            np.testing.assert_allclose(a.center, b.center, atol=1e-3)
+            # 1 mm depth quantisation moves the points, and so their median, by about 1 mm
+            np.testing.assert_allclose(a.center, b.center, atol=2e-3)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.uint16])

@@ -209,7 +209,7 @@ def test_pseudo_measurements_match_the_tracker():
     track = Track(1, d0, 0, times[0], cfg)
     fed = []
     real_update = track.kf.update
-    track.kf.update = lambda z: (fed.append(np.array(z, float)), real_update(z))
+    track.kf.update = lambda z, **kw: (fed.append(np.array(z, float)), real_update(z, **kw))
     meas = PseudoMeasurements(cfg.kalman.averaging_frames)
     meas.first(times[0], d0.center[:2])
     built = []
