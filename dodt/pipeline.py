@@ -78,7 +78,8 @@ class DODT:
         self.tracker = Tracker(self.cfg)
         self.last_stamp: float | None = None
         self.poses: dict[int, np.ndarray] = {}
-        self.clouds: dict[int, object] = {}  # seq -> k-d tree of that frame's filtered cloud
+        self.clouds: dict[int, np.ndarray] = {}  # seq -> that frame's filtered cloud
+        self._trees: dict[int, object] = {}  # seq -> its k-d tree, built when first needed
         self._pose_order: deque[int] = deque()
         self.counters = {"frames": 0, "skipped_bad_pose": 0, "skipped_time": 0, "restarted_after_gap": 0,
                          "bad_pixels": 0, "frames_with_bad_pixels": 0}
@@ -89,9 +90,17 @@ class DODT:
         self.last_stamp = None
         self.poses.clear()
         self.clouds.clear()
+        self._trees.clear()
         self._pose_order.clear()
 
     # ------------------------------------------------------------------ helpers
+
+    def _tree(self, seq: int):
+        """k-d tree of frame seq's cloud (None if gone or empty), built once, when first asked."""
+        if seq not in self._trees:
+            pts = self.clouds.get(seq)
+            self._trees[seq] = cKDTree(pts) if pts is not None and len(pts) else None
+        return self._trees[seq]
 
     def _skip(self, frame: SensorFrame, why: str, bad_pixels: int = 0) -> PerceptionResult:
         self.counters[why] += 1
@@ -166,13 +175,12 @@ class DODT:
             old = self._pose_order.popleft()
             self.poses.pop(old, None)
             self.clouds.pop(old, None)
+            self._trees.pop(old, None)
 
         t0 = time.perf_counter()
         points = self.cloud(depth_m, frame.intrinsics, T)
         t_cloud = (time.perf_counter() - t0) * 1e3
-        t0 = time.perf_counter()
-        self.clouds[seq] = cKDTree(points) if len(points) else None
-        t_tree = (time.perf_counter() - t0) * 1e3
+        self.clouds[seq] = points
         dets, debug = self._detect(frame, depth_m, T, points)
 
         t0 = time.perf_counter()
@@ -184,10 +192,10 @@ class DODT:
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T, (self.cfg.depth.depth_min, self.cfg.depth.depth_max))
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
-            tr.identify(seq, self.poses, self.clouds, frame.intrinsics, self.cfg.depth.depth_max)
+            tr.identify(seq, self.poses, self._tree, frame.intrinsics, self.cfg.depth.depth_max)
         t3 = time.perf_counter()
         timings = {"point_cloud": t_cloud, **debug["timings"], "association": (t1 - t0) * 1e3,
-                   "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3 + t_tree,
+                   "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3,
                    "total": (t3 - t_start) * 1e3}
         boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]] for k in ("udepth", "dbscan", "ensemble")}
         return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),

@@ -106,7 +106,8 @@ class Track:
         self.is_person = self.is_person or det.is_person
         self.coasting = False
 
-    def identify(self, seq: int, poses: dict, clouds: dict, K: CameraIntrinsics, max_depth: float) -> None:
+    def identify(self, seq: int, poses: dict, cloud_tree, K: CameraIntrinsics, max_depth: float) -> None:
+        """cloud_tree(seq) -> k-d tree of that frame's whole filtered cloud, or None."""
         cfg = self.cfg.identification
         if self.is_person:
             cand = True
@@ -119,10 +120,11 @@ class Track:
             # the cloud from k frames back, or the oldest one kept since then
             old = [c for c in self.clouds if cur_seq - cfg.frame_skip <= c[0] < cur_seq]
             votes, valid, skipped = 0, 0, len(cur_pts)
-            if old and cfg.method != "velocity":
+            # voting only for what moves fast enough to be a candidate at all (saves the work)
+            if old and cfg.method != "velocity" and speed >= cfg.velocity_threshold:
                 o_seq, o_t, o_pts = old[0]
                 T_then = poses.get(o_seq)
-                tree_then = clouds.get(o_seq)
+                tree_then = cloud_tree(o_seq) if T_then is not None else None
                 if T_then is not None and tree_then is not None and len(o_pts) and len(cur_pts):
                     v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(cur_t - o_t, 1e-6)
                     votes, valid, skipped = vote(cur_pts, tree_then, cur_t - o_t, v_box, T_then, K, max_depth, cfg)
