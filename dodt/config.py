@@ -16,7 +16,7 @@ class DepthConfig:
     depth_max: float = 5.0  # m, ref depth_max_value
     margin: int = 10  # px border skipped, ref depth_filter_margin
     skip: int = 2  # every skip-th row and column, ref depth_skip_pixel
-    max_frame_gap: float = 0.5  # s; a longer gap between frames restarts the tracks' velocity estimates (ours)
+    max_frame_gap: float = 0.5  # s; a gap longer than this and than the coasting time restarts the tracks (ours)
 
 
 @dataclass(frozen=True)
