@@ -25,6 +25,10 @@ class VoxelConfig:
     # ref voxel_occupied_thresh is 15; ours is 6: the simulated humanoid's limbs are thinner than a
     # real person's, and 15 leaves 20 points on a person at 4.5 m where 6 keeps 58
     occupied_threshold: int = 6  # points per voxel
+    # ours: the threshold holds at this distance and scales with (this / distance)^2, as the
+    # number of pixels a voxel covers does; 0 keeps it fixed (the reference code)
+    threshold_reference_distance: float = 3.0
+    min_occupied_threshold: int = 3
     ground_height: float = 0.2  # m, points below are dropped, ref ground_height
     ceiling_height: float = 2.8  # m, points above are dropped (ours: the ref has no ceiling filter)
     local_range: float = 5.0  # m around the camera, ref localSensorRange
@@ -123,7 +127,7 @@ class IdentificationConfig:
     vote_ratio: float = 0.8  # T_ratio, ref dynamic_voting_threshold
     max_skip_ratio: float = 0.5  # ref maximum_skip_ratio
     max_point_speed: float = 2.5  # m/s; farther nearest neighbours are no correspondence (ours)
-    range_margin: float = 0.5  # m; points this close to depth_max back then are not voted on (ours)
+    range_margin: float = 0.2  # m; points this close to depth_max back then are not voted on (ours)
     # px; points that were this close to the image border back then are not voted on: the cloud
     # skips the border (depth margin 10 px), and an edge of the view cuts obstacles (ours)
     fov_margin_px: float = 15.0

@@ -2,8 +2,10 @@
 
 One compiled pass over the sampled pixels (border margin, pixel skip, depth range) projects
 each pixel with the camera pose and accumulates it into a voxel grid around the camera; a voxel
-with at least ``occupied_threshold`` points emits one point, the centroid of its points (the
-reference code emits its N-th point; the centroid is less noisy). Points below the ground
+with enough points emits one point, the centroid of its points (the reference code emits its
+N-th point; the centroid is less noisy). "Enough" is ``occupied_threshold`` at
+``threshold_reference_distance`` from the camera, scaled with the square of the distance as the
+sampling density is (the reference code's fixed count loses far obstacles first). Points below the ground
 height, above the ceiling height or beyond the local range are dropped. Voxels are aligned to
 the world grid, so the same surface gives the same voxels from frame to frame.
 """
@@ -17,8 +19,8 @@ from dodt.frames import CameraIntrinsics
 
 
 @njit(cache=True, nogil=True)
-def _cloud_voxel_kernel(depth, fx, fy, cx, cy, R, t, margin, skip, dmin, dmax, res, thresh, zlo, zhi,
-                        origin, n, counts, sums, touched):
+def _cloud_voxel_kernel(depth, fx, fy, cx, cy, R, t, margin, skip, dmin, dmax, res, thresh, ref_dist, min_thresh,
+                        zlo, zhi, origin, n, counts, sums, touched):
     H, W = depth.shape
     n_touched = 0
     for v in range(margin, H - margin, skip):
@@ -46,16 +48,29 @@ def _cloud_voxel_kernel(depth, fx, fy, cx, cy, R, t, margin, skip, dmin, dmax, r
             sums[k, 0] += x
             sums[k, 1] += y
             sums[k, 2] += z
+    # A voxel's count threshold: fixed, or scaled with the sampling density, which falls with
+    # the square of the distance (pixels per voxel face ~ (f res / (skip d))^2).
+    keep = np.zeros(n_touched, np.bool_)
     m = 0
     for i in range(n_touched):
-        if counts[touched[i]] >= thresh:
+        k = touched[i]
+        c = counts[k]
+        th = float(thresh)
+        if ref_dist > 0:
+            dx = sums[k, 0] / c - t[0]
+            dy = sums[k, 1] / c - t[1]
+            dz = sums[k, 2] / c - t[2]
+            d2 = dx * dx + dy * dy + dz * dz
+            th = max(float(min_thresh), thresh * ref_dist * ref_dist / max(d2, 1e-6))
+        if c >= th:
+            keep[i] = True
             m += 1
     out = np.empty((m, 3), np.float32)
     j = 0
     for i in range(n_touched):
         k = touched[i]
         c = counts[k]
-        if c >= thresh:
+        if keep[i]:
             out[j, 0] = sums[k, 0] / c
             out[j, 1] = sums[k, 1] / c
             out[j, 2] = sums[k, 2] / c
@@ -93,7 +108,7 @@ class VoxelCloud:
             np.ascontiguousarray(T_world_camera[:3, :3], dtype=np.float64),
             np.ascontiguousarray(cam, dtype=np.float64), self.d.margin, self.d.skip,
             self.d.depth_min, self.d.depth_max, res, self.v.occupied_threshold,
-            self.v.ground_height, self.v.ceiling_height, origin, self.n, self._counts, self._sums, self._touched)
+            self.v.threshold_reference_distance, self.v.min_occupied_threshold, self.v.ground_height, self.v.ceiling_height, origin, self.n, self._counts, self._sums, self._touched)
 
 
 def depth_to_points(depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray, cfg: DepthConfig,
