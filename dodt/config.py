@@ -28,7 +28,7 @@ class VoxelConfig:
     # ours: the threshold holds at this distance and scales with (this / distance)^2, as the
     # number of pixels a voxel covers does; 0 keeps it fixed (the reference code)
     threshold_reference_distance: float = 3.0
-    min_occupied_threshold: int = 3
+    min_occupied_threshold: int = 4
     ground_height: float = 0.2  # m, points below are dropped, ref ground_height
     ceiling_height: float = 2.8  # m, points above are dropped (ours: the ref has no ceiling filter)
     local_range: float = 5.0  # m around the camera, ref localSensorRange
