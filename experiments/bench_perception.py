@@ -22,7 +22,7 @@ from dodt.pipeline import DODT, MODULES
 from dodt.presets import PRESETS, preset
 from experiments.perception_metrics import PerceptionMetrics
 from sim import World, load_scenario
-from sim.trajectories import straight_line
+from sim.trajectories import scenario_reference
 
 SCENARIOS = ("circles", "follow_person", "wall_pass", "partial_obstacle", "static_only", "corridor")
 
@@ -39,21 +39,12 @@ PAPER_TABLE_I = {
 PAPER_TABLE_II = {"udepth": 3.4, "dbscan": 1.3, "association": 0.03, "kalman": 0.07, "identification": 0.12}
 
 
-def _reference(world: World):
-    """The drone's reference: the scripted path, or the straight flight of the corridor."""
-    sc = world.scenario
-    if sc.camera_path is not None:
-        return lambda t: None
-    at, _ = straight_line(sc.drone.start, sc.drone.goal, sc.drone.cruise_speed)
-    return at
-
-
 def run_scenario(name: str, seed: int, configs: list[str], duration: float | None = None,
                  record_tracks: bool = False):
     """Simulate one scenario once and score every configuration on its frames."""
     sc = load_scenario(name)
     world = World(sc, seed=seed, segmentation=True)
-    ref = _reference(world)
+    ref = scenario_reference(sc)
     pipes = {c: DODT(preset(c)) for c in configs}
     metrics = {c: PerceptionMetrics() for c in configs}
     tracks = {c: [] for c in configs}
@@ -196,7 +187,7 @@ def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration
 def record_frames(scenario: str = "corridor", seconds: float = 6.0, seed: int = 0) -> list:
     sc = load_scenario(scenario)
     world = World(sc, seed=seed, segmentation=False)
-    ref = _reference(world)
+    ref = scenario_reference(sc)
     frames = [world.latest_frame()]
     while world.time < seconds:
         f = world.step(ref(world.time))

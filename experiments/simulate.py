@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from sim import World, load_scenario
-from sim.trajectories import straight_line
+from sim.trajectories import scenario_reference
 
 
 def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | None = None,
@@ -33,9 +33,7 @@ def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | 
         (out / sub).mkdir(exist_ok=True)
     t_wall = time.perf_counter()
     world = World(sc, seed=seed, renderer=renderer, segmentation=segmentation)
-    ref_at = None
-    if sc.camera_path is None:
-        ref_at, _ = straight_line(sc.drone.start, sc.drone.goal, sc.drone.cruise_speed)
+    ref_at = scenario_reference(sc)
     sensor_frames, truth_frames = [], []
     frame = world.latest_frame()
     n_steps = int(round(duration / (world.dt * world.steps_per_control)))
@@ -44,7 +42,7 @@ def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | 
             _save_frame(out, frame, world.ground_truth(), sensor_frames, truth_frames)
         if k == n_steps:
             break
-        frame = world.step(ref_at(world.time) if ref_at else None)
+        frame = world.step(ref_at(world.time))
     wall = time.perf_counter() - t_wall
     st = world.state()
     K = world.intrinsics

@@ -56,3 +56,13 @@ def figure_eight(center, radius: float, period: float, yaw: float = 0.0):
         return Reference(position=pos, velocity=vel, acceleration=acc, yaw=yaw)
 
     return at
+
+
+def scenario_reference(scenario):
+    """What the drone flies in a scenario without a planner: None at every time for a scripted
+    camera path (the world follows the path itself), else the straight line from the drone's
+    start to its goal at the cruise speed. Returns reference_at(t)."""
+    if scenario.camera_path is not None:
+        return lambda t: None
+    at, _ = straight_line(scenario.drone.start, scenario.drone.goal, scenario.drone.cruise_speed)
+    return at
