@@ -113,6 +113,12 @@ class KalmanConfig:
 @dataclass(frozen=True)
 class TrackConfig:
     coast_time: float = 1.0  # s a track survives without detections on its prediction (beyond the paper)
+    # a coasting track is dropped when, after this many missed frames, this fraction of its image
+    # region is seen this far behind where it should be (it is not there). Measured on circles,
+    # corridor and wall_pass: 0.9 / 0.5 m gave FP 4.9 %, recall 92.4 %; 0.75 / 0.3 m 1.8 %, 91.0 %
+    seen_through_after: int = 3
+    seen_through_fraction: float = 0.75
+    seen_through_margin: float = 0.3  # m
     history: int = 100  # states kept per track, ref history_size
     output_history: float = 3.0  # s of centre history in the output (the paper's figures show 3 s)
     size_smoothing: float = 0.3  # output size: exponential smoothing weight of the new detection (ours)

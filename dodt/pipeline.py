@@ -189,7 +189,9 @@ class DODT:
         pairs = self.tracker.associate(dets, T[:3, 3])
         t1 = time.perf_counter()
         self.tracker.correct(dets, pairs, seq, stamp)
-        self.tracker.drop_seen_through(depth_m, frame.intrinsics, T, (self.cfg.depth.depth_min, self.cfg.depth.depth_max))
+        tc = self.cfg.track
+        self.tracker.drop_seen_through(depth_m, frame.intrinsics, T, (self.cfg.depth.depth_min, self.cfg.depth.depth_max),
+                                       tc.seen_through_margin, tc.seen_through_fraction, tc.seen_through_after)
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
             tr.identify(seq, self.poses, self._tree, frame.intrinsics, self.cfg.depth.depth_max)

@@ -160,7 +160,8 @@ class Tracker:
             t.kf.predict(dt)
 
     def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray,
-                          depth_range: tuple[float, float], margin: float = 0.5) -> int:
+                          depth_range: tuple[float, float], margin: float = 0.5, fraction: float = 0.9,
+                          after: int = 3) -> int:
         """Delete coasting tracks whose predicted place is in view and seen through: the camera
         sees clearly farther than where the obstacle should be, so it is not there (it is
         occluded when something nearer is seen, and then it keeps coasting). Returns how many."""
@@ -168,7 +169,7 @@ class Tracker:
         keep, dropped = [], 0
         H, W = depth_m.shape
         for tr in self.tracks:
-            if tr.coasting and tr.missed >= 3:
+            if tr.coasting and tr.missed >= after:
                 c = np.array([*tr.center_xy, tr.z]) - t
                 pc = c @ R
                 if depth_range[0] <= pc[2] <= depth_range[1]:
@@ -183,7 +184,7 @@ class Tracker:
                         win = depth_m[v0:v1 + 1:2, u0:u1 + 1:2]
                         win = win[win > 0]
                         # seen through: nearly everything in the box's image region lies behind it
-                        if win.size >= 20 and np.mean(win > pc[2] + margin) > 0.9:
+                        if win.size >= 20 and np.mean(win > pc[2] + margin) > fraction:
                             dropped += 1
                             continue
             keep.append(tr)
