@@ -111,14 +111,11 @@ class VoxelCloud:
             self.v.threshold_reference_distance, self.v.min_occupied_threshold, self.v.ground_height, self.v.ceiling_height, origin, self.n, self._counts, self._sums, self._touched)
 
 
-def depth_to_points(depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray, cfg: DepthConfig,
-                    rows=None, cols=None) -> np.ndarray:
+def depth_to_points(depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray,
+                    cfg: DepthConfig) -> np.ndarray:
     """All valid sampled pixels (margin, skip, range) as (N, 3) world points (no voxel filter)."""
     H, W = depth_m.shape
     v, u = np.mgrid[cfg.margin:H - cfg.margin:cfg.skip, cfg.margin:W - cfg.margin:cfg.skip]
-    if rows is not None:
-        keep = (v >= rows[0]) & (v < rows[1]) & (u >= cols[0]) & (u < cols[1])
-        v, u = v[keep], u[keep]
     d = depth_m[v, u]
     ok = (d >= cfg.depth_min) & (d <= cfg.depth_max)
     pc = K.backproject(u[ok], v[ok], d[ok])
