@@ -72,8 +72,16 @@ class SensorFrame:
 
     def depth_m(self) -> np.ndarray:
         """Depth as float32 metres with 0 for invalid pixels."""
+        return self.depth_m_counted()[0]
+
+    def depth_m_counted(self) -> tuple[np.ndarray, int]:
+        """(depth as float32 metres with 0 for invalid pixels, how many NaN / inf / negative
+        pixels were made 0). A uint16 image has none."""
         if self.depth.dtype == np.uint16:
-            return self.depth.astype(np.float32) * np.float32(self.depth_scale)
+            return self.depth.astype(np.float32) * np.float32(self.depth_scale), 0
         d = self.depth.astype(np.float32, copy=True)
-        d[~np.isfinite(d) | (d < 0)] = 0.0
-        return d
+        bad = ~np.isfinite(d) | (d < 0)
+        n_bad = int(np.count_nonzero(bad))
+        if n_bad:
+            d[bad] = 0.0
+        return d, n_bad

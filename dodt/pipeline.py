@@ -109,17 +109,6 @@ class DODT:
                                 timings_ms={m: 0.0 for m in MODULES} | {"total": 0.0}, skipped=why,
                                 bad_pixels=bad_pixels)
 
-    def _depth_m(self, frame: SensorFrame) -> tuple[np.ndarray, int]:
-        d = frame.depth
-        if d.dtype == np.uint16:
-            return d.astype(np.float32) * np.float32(frame.depth_scale), 0
-        z = d.astype(np.float32, copy=True)
-        bad = ~np.isfinite(z) | (z < 0)
-        n_bad = int(bad.sum())
-        if n_bad:
-            z[bad] = 0.0
-        return z, n_bad
-
     def _detect(self, frame, depth_m, T, points) -> tuple[list[Detection], dict]:
         cfg = self.cfg.ensemble
         timings = {}
@@ -153,7 +142,7 @@ class DODT:
         self.counters["frames"] += 1
         T = np.asarray(frame.T_world_camera, dtype=np.float64)
         stamp = float(frame.stamp)
-        depth_m, n_bad = self._depth_m(frame)
+        depth_m, n_bad = frame.depth_m_counted()
         if n_bad:
             self.counters["bad_pixels"] += n_bad
             self.counters["frames_with_bad_pixels"] += 1
@@ -189,9 +178,7 @@ class DODT:
         pairs = self.tracker.associate(dets, T[:3, 3])
         t1 = time.perf_counter()
         self.tracker.correct(dets, pairs, seq, stamp)
-        tc = self.cfg.track
-        self.tracker.drop_seen_through(depth_m, frame.intrinsics, T, (self.cfg.depth.depth_min, self.cfg.depth.depth_max),
-                                       tc.seen_through_margin, tc.seen_through_fraction, tc.seen_through_after)
+        self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
             tr.identify(seq, self.poses, self._tree, frame.intrinsics, self.cfg.depth.depth_max)

@@ -58,7 +58,6 @@ class Track:
         self.clouds.append((seq, stamp, det.points))
         self.history: deque[tuple[float, float, float, float]] = deque(maxlen=cfg.track.history)
         self.history.append((stamp, float(det.center[0]), float(det.center[1]), self.z))
-        self.n_detections = 1
         self.candidates: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic_history: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic = False
@@ -78,7 +77,8 @@ class Track:
     def update(self, det: Detection, seq: int, stamp: float) -> None:
         k = self.cfg.kalman
         obs = list(self.observations)
-        prev = obs[max(0, len(obs) - k.averaging_frames)]  # up to averaging_frames back
+        first = max(0, len(obs) - k.averaging_frames)  # up to averaging_frames back
+        prev = obs[first]
         dt = stamp - prev.stamp
         anchor = _anchor(det, k.position_source)
         self.offset = 0.7 * self.offset + 0.3 * (det.center[:2] - anchor)
@@ -89,20 +89,19 @@ class Track:
         # Acceleration needs a velocity measured back then; until there is one, measure none
         # (the filter's own estimate, so the update adds no innovation there).
         a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
-        window = (len(obs) - obs.index(prev)) / k.averaging_frames  # frames spanned / full window
+        window = (len(obs) - first) / k.averaging_frames  # frames spanned / full window
         self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window)
         self.observations.append(_Observation(seq, stamp, anchor.copy(), v))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
         # which then cannot follow a person whose box changes as they turn or swing their arms).
-        a = self.cfg.track.size_smoothing
-        self.size = (1 - a) * self.size + a * det.size
+        w_new = self.cfg.track.size_smoothing
+        self.size = (1 - w_new) * self.size + w_new * det.size
         self.det_size = det.size.copy()
         self.count, self.spread = features(det)
         self.clouds.append((seq, stamp, det.points))
         self.last_seen = stamp
         self.missed = 0
-        self.n_detections += 1
         self.is_person = self.is_person or det.is_person
         self.coasting = False
 
@@ -159,20 +158,19 @@ class Tracker:
                 t.kf.x[4:6] = 0.0  # unobserved acceleration would run away: coast at constant velocity
             t.kf.predict(dt)
 
-    def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray,
-                          depth_range: tuple[float, float], margin: float = 0.5, fraction: float = 0.9,
-                          after: int = 3) -> int:
+    def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> int:
         """Delete coasting tracks whose predicted place is in view and seen through: the camera
         sees clearly farther than where the obstacle should be, so it is not there (it is
         occluded when something nearer is seen, and then it keeps coasting). Returns how many."""
+        tc, dc = self.cfg.track, self.cfg.depth
         R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
         keep, dropped = [], 0
         H, W = depth_m.shape
         for tr in self.tracks:
-            if tr.coasting and tr.missed >= after:
+            if tr.coasting and tr.missed >= tc.seen_through_after:
                 c = np.array([*tr.center_xy, tr.z]) - t
                 pc = c @ R
-                if depth_range[0] <= pc[2] <= depth_range[1]:
+                if dc.depth_min <= pc[2] <= dc.depth_max:
                     half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
                     half_h = 0.5 * tr.size[2] * K.fy / pc[2]
                     u = K.fx * pc[0] / pc[2] + K.cx
@@ -184,7 +182,7 @@ class Tracker:
                         win = depth_m[v0:v1 + 1:2, u0:u1 + 1:2]
                         win = win[win > 0]
                         # seen through: nearly everything in the box's image region lies behind it
-                        if win.size >= 20 and np.mean(win > pc[2] + margin) > fraction:
+                        if win.size >= 20 and np.mean(win > pc[2] + tc.seen_through_margin) > tc.seen_through_fraction:
                             dropped += 1
                             continue
             keep.append(tr)

@@ -15,7 +15,7 @@ from sim.camera import quiet_stdout, render
 
 with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
-from sim.trajectories import straight_line
+from sim.trajectories import scenario_reference
 
 
 def _median_ms(fn, n: int) -> float:
@@ -59,7 +59,7 @@ def bench_physics(scenario: str, steps: int) -> dict:
 def bench_realtime(scenario: str, seconds: float, segmentation: bool) -> dict:
     sc = load_scenario(scenario)
     w = World(sc, seed=0, segmentation=segmentation)
-    ref_at, _ = straight_line(sc.drone.start, sc.drone.goal, sc.drone.cruise_speed)
+    ref_at = scenario_reference(sc)
     w.render_wall_time = 0.0
     n = int(round(seconds * sc.rates.control))
     t0 = time.perf_counter()
