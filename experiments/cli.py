@@ -6,6 +6,7 @@ wrong and exit with status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -64,6 +65,69 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _cmd_run(args) -> int:
+    from experiments.episode import EpisodeConfig, run_episode
+    from experiments.perception_modes import MODES
+    from dodt.presets import PRESETS
+
+    sc = load_scenario(args.scenario)
+    if args.perception not in MODES and args.perception not in PRESETS:
+        known = ", ".join(dict.fromkeys(MODES + tuple(PRESETS)))
+        raise UserError(f"--perception: unknown mode {args.perception!r}; known: {known}")
+    if args.duration is not None and args.duration <= 0:
+        raise UserError("--duration: must be > 0")
+    s = run_episode(sc, seed=args.seed, perception=args.perception, out=Path(args.out),
+                    cfg=EpisodeConfig(duration=args.duration), renderer=args.renderer)
+    outcome = "success" if s["success"] else f"failure ({s['failure_reason']})"
+    ttg = f"{s['time_to_goal']:.2f} s" if s["time_to_goal"] is not None else "-"
+    mc = s["min_clearance"]
+    tm = s["timing"]
+    print(f"{s['scenario']} seed {s['seed']} perception {s['perception']}: {outcome}; time to goal {ttg}, "
+          f"path {s['path_length']:.2f} m, mean speed {s['mean_speed']:.2f} m/s, collisions {s['collision_count']}")
+    print("min clearance [m]: " + ", ".join(f"{k} {v:.2f}" for k, v in mc.items() if v is not None))
+    print(f"planner solve median {tm['planner_solve_ms'].get('median', '-')} ms, p99 {tm['planner_solve_ms'].get('p99', '-')} ms, "
+          f"fallbacks {s['planner_stats']['fallbacks']}; perception median {tm['perception_ms'].get('median', '-')} ms; "
+          f"{s['sim_time']:.1f} s simulated in {tm['wall_s']:.1f} s ({tm['real_time_factor']}x real time)")
+    print(f"wrote {args.out}/summary.json and {args.out}/log.jsonl.gz")
+    return 0
+
+
+def _cmd_sweep(args) -> int:
+    from dodt.presets import PRESETS
+    from experiments import sweep
+    from experiments.perception_modes import MODES
+
+    load_scenario(args.scenario)  # validate before starting workers
+    if args.perception not in MODES and args.perception not in PRESETS:
+        known = ", ".join(dict.fromkeys(MODES + tuple(PRESETS)))
+        raise UserError(f"--perception: unknown mode {args.perception!r}; known: {known}")
+    if args.jobs < 1:
+        raise UserError("--jobs: must be >= 1")
+    if args.max_collision_rate is not None and not 0.0 <= args.max_collision_rate <= 1.0:
+        raise UserError("--max-collision-rate: must be a fraction between 0 and 1")
+    try:
+        seeds = sweep.parse_seeds(args.seeds)
+        agg = sweep.run_sweep(args.scenario, seeds, args.perception, Path(args.out), jobs=args.jobs,
+                              dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet)
+    except sweep.SweepError as e:
+        raise UserError(str(e)) from None
+    r = agg["rates"]
+    print(f"{agg['scenario']} / {agg['perception']}: {agg['episodes']} episodes; success "
+          f"{100 * r['success']['rate']:.1f} % [{100 * r['success']['ci95'][0]:.1f}, {100 * r['success']['ci95'][1]:.1f}], "
+          f"collision {100 * r['collision']['rate']:.1f} % [{100 * r['collision']['ci95'][0]:.1f}, "
+          f"{100 * r['collision']['ci95'][1]:.1f}], timeout {100 * r['timeout']['rate']:.1f} %")
+    print(f"wrote {args.out}/summary.json, {args.out}/summary.md")
+    if args.junit:
+        by_seed = sweep.read_results(Path(args.out) / sweep.RESULTS)
+        Path(args.junit).write_text(sweep.junit(agg, by_seed))
+        print(f"wrote {args.junit}")
+    if args.max_collision_rate is not None and r["collision"]["rate"] > args.max_collision_rate:
+        print(f"collision rate {r['collision']['rate']:.4f} exceeds --max-collision-rate {args.max_collision_rate}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
 def _cmd_scenarios(args) -> int:
     for name in shipped_scenarios():
         sc = load_scenario(name)
@@ -107,6 +171,29 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--frames", type=int, default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     b.set_defaults(func=_cmd_bench)
+
+    r = sub.add_parser("run", help="fly one closed-loop episode headless; write summary.json and the episode log")
+    r.add_argument("scenario", help="a scenario file, or the name of a shipped one (see `dodt-nav scenarios`)")
+    r.add_argument("--seed", type=int, default=None, help="seed (default: the scenario's)")
+    r.add_argument("--perception", default="dodt", help="dodt (default), oracle, static-only, or a DODT preset")
+    r.add_argument("--out", required=True, help="output folder")
+    r.add_argument("--duration", type=float, default=None, help="time limit in seconds (default: the scenario's)")
+    r.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
+    r.set_defaults(func=_cmd_run)
+
+    w = sub.add_parser("sweep", help="run many seeds in parallel; resumable; rates with Wilson intervals; CI gate")
+    w.add_argument("scenario", help="a scenario file, or the name of a shipped one")
+    w.add_argument("--seeds", default="0:20", help="start:stop, a number, or a comma list (default 0:20)")
+    w.add_argument("--perception", default="dodt", help="dodt (default), oracle, static-only, or a DODT preset")
+    w.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
+    w.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
+    w.add_argument("--max-collision-rate", type=float, default=None,
+                   help="exit with status 1 when the collision rate exceeds this fraction")
+    w.add_argument("--junit", default=None, help="write JUnit XML, one test case per seed")
+    w.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
+    w.add_argument("--keep-logs", action="store_true", help="keep the episode logs of successful episodes too")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    w.set_defaults(func=_cmd_sweep)
 
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)

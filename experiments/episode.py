@@ -1,0 +1,230 @@
+"""One closed-loop episode: sim -> sensor frame -> perception -> voxel map -> planner -> controller.
+
+Rates, all in sim time: physics and the controller as the scenario says (240 / 120 Hz), camera
+frames at the camera rate (30 Hz) each go through perception, every ``map_every``-th frame updates
+the voxel map (with the perception's dynamic boxes cleared), the planner runs at ``plan_rate``
+(10 Hz) and the controller tracks the latest plan at every control period. Moving obstacles
+reach the planner extrapolated from their perception stamp to the planning time.
+
+Nothing in the loop raises on a planner or perception failure: a planner exception becomes a
+brake-and-hold trajectory (status ``error:<type>``), a frame perception skips is counted.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from experiments.episode_log import EpisodeLog, r4
+from experiments.episode_metrics import summarize
+from experiments.perception_modes import PerceptionModule, make_perception
+from planner.fallback import brake_and_hold
+from planner.mpc import MPCConfig
+from planner.navigator import MPCPlanner, NavigatorConfig
+from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
+from planner.voxel_map import MapConfig, VoxelMap
+from sim import World, load_scenario
+from sim.controller import Reference
+
+GOAL_TOLERANCE = 0.4  # m: the episode succeeds when the drone is this close to the goal
+CRASH_ALTITUDE = 0.1  # m: below this the drone is on the floor
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    plan_rate: float = 10.0  # Hz; reference planners replan at 10-20 Hz
+    map_every: int = 2  # camera frames per map update: 15 Hz at 30 Hz (reference map timer: 20 Hz)
+    max_yaw_rate: float = 1.2  # rad/s, heading changes toward the planner's yaw
+    map_snapshot_period: float = 1.0  # s between occupied-voxel snapshots in the log
+    duration: float | None = None  # s; None: the scenario's duration
+
+
+def map_config_for(scenario, robot_radius: float) -> MapConfig:
+    """Map bounds: the corridor (the flight area is a known geofence) with a margin; the robot size
+    for the path search's inflation: the drone's horizontal circumscribed circle."""
+    co = scenario.corridor
+    margin = 0.5
+    return MapConfig(origin=(-margin, -co.width / 2 - margin, -0.1),
+                     size=(co.length + 2 * margin, co.width + 2 * margin, co.height + 0.2),
+                     robot_size=(2 * robot_radius, 2 * robot_radius, 0.3))
+
+
+def default_planner(robot_radius: float) -> MPCPlanner:
+    """The A* + MPC planner sized for the drone (its collision box's horizontal circumscribed radius)."""
+    return MPCPlanner(NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius)))
+
+
+def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePrediction, ...]:
+    lag = max(now - stamp, 0.0)
+    if lag == 0.0:
+        return tuple(obstacles)
+    out = []
+    for o in obstacles:
+        c = o.predict(np.array([lag]))[0]
+        v = o.velocity + o.acceleration * min(lag, o.accel_horizon)
+        out.append(replace(o, center=c, velocity=v, position_std=float(o.std_at(np.array([lag]))[0])))
+    return tuple(out)
+
+
+def _finite_trajectory(traj) -> bool:
+    return isinstance(traj, Trajectory) and all(np.all(np.isfinite(a)) for a in
+                                                (traj.positions, traj.velocities, traj.accelerations))
+
+
+def run_episode(scenario, seed: int | None = None, perception: str | PerceptionModule = "dodt",
+                planner: Planner | None = None, out: Path | None = None, cfg: EpisodeConfig = EpisodeConfig(),
+                renderer: str | None = None, on_frame=None) -> dict:
+    """Fly one episode; returns the summary (and writes summary.json and log.jsonl.gz to ``out``).
+
+    scenario: a Scenario or a shipped scenario name / TOML path. perception: a mode name
+    (dodt, oracle, static-only, any DODT preset) or a PerceptionModule. planner: any object with
+    ``reset()`` and ``plan(PlannerInput) -> Trajectory``; default the A* + MPC planner.
+    on_frame(world, perception_output, vmap, trajectory): optional callback per camera frame
+    (live viewers).
+    """
+    sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
+    seed = sc.seed if seed is None else int(seed)
+    perc = make_perception(perception) if isinstance(perception, str) else perception
+    duration = sc.duration if cfg.duration is None else cfg.duration
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+    log = EpisodeLog(None if out is None else out / "log.jsonl.gz")
+    t_wall = time.perf_counter()
+    world = World(sc, seed=seed, renderer=renderer, segmentation=False)
+    planner = planner if planner is not None else default_planner(world.vehicle.radius)
+    try:
+        summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame)
+    finally:
+        world.close()
+        log.close()
+    wall = time.perf_counter() - t_wall
+    summary["timing"]["wall_s"] = round(wall, 2)
+    summary["timing"]["real_time_factor"] = round(summary["sim_time"] / wall, 3) if wall > 0 else None
+    summary["timing"]["renderer"] = world.renderer
+    if out is not None:
+        (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeConfig, duration, on_frame) -> dict:
+    perc.reset()
+    planner.reset()
+    vmap = VoxelMap(map_config_for(sc, world.vehicle.radius))
+    goal = np.asarray(sc.drone.goal, dtype=float)
+    control_dt = world.dt * world.steps_per_control
+    plan_every = max(1, int(round(1.0 / (cfg.plan_rate * control_dt))))
+    log.add({"k": "header", "scenario": sc.name, "source": sc.source, "seed": seed, "perception": perc.name,
+             "planner": type(planner).__name__, "duration": duration,
+             "rates": {"control": 1.0 / control_dt, "camera": sc.rates.camera, "plan": cfg.plan_rate,
+                       "map": sc.rates.camera / cfg.map_every},
+             "corridor": {"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
+             "start": list(sc.drone.start), "goal": goal.tolist(), "map_resolution": vmap.cfg.resolution,
+             "map_origin": list(vmap.cfg.origin),
+             "static": [o.to_json() for o in world.ground_truth().obstacles if o.kind == "static"],
+             "people": [{"id": i, "height": round(w.height, 3)} for i, w in zip(world.person_ids, world.walkers)]})
+
+    obstacles, obstacles_stamp = (), 0.0
+    traj: Trajectory | None = None
+    yaw = float(sc.drone.yaw)
+    accel_cmd = np.zeros(3)
+    n_frames = 0
+    next_snapshot = 0.0
+    n_collisions = 0
+    reason, time_to_goal = "timeout", None
+    frame, truth = world.latest_frame(), world.ground_truth()
+    k = 0
+    while True:
+        t = world.time
+        if frame is not None:
+            t0 = time.perf_counter()
+            po = perc.update(frame, truth if perc.uses_ground_truth else None)
+            perc_ms = (time.perf_counter() - t0) * 1e3
+            if po.skipped is None:
+                obstacles, obstacles_stamp = po.obstacles, po.stamp
+            map_ms = None
+            if n_frames % cfg.map_every == 0:
+                depth_m, _ = frame.depth_m_counted()
+                m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera, dynamic_boxes=po.clear_boxes,
+                                stamp=frame.stamp)
+                map_ms = m.get("ms")
+            n_frames += 1
+            q = world.T_world_body()
+            people = [o for o in truth.obstacles if o.kind == "person"]
+            log.add({"k": "f", "t": round(t, 4), "R": r4(q[:3, :3]), "tracks": po.tracks,
+                     "people": [{"id": o.id, "lo": r4(o.aabb_min), "hi": r4(o.aabb_max), "v": r4(o.velocity[:2])}
+                                for o in people],
+                     "perc_ms": round(perc_ms, 3), "map_ms": None if map_ms is None else round(map_ms, 3),
+                     "skipped": po.skipped})
+            if t >= next_snapshot:
+                idx = vmap.occupied_indices()
+                above_floor = idx[:, 2] * vmap.cfg.resolution + vmap.cfg.origin[2] >= 0.1
+                log.add({"k": "map", "t": round(t, 4), "voxels": idx[above_floor].tolist()})
+                next_snapshot = t + cfg.map_snapshot_period
+            if on_frame is not None:
+                on_frame(world, po, vmap, traj)
+
+        st = world.state()
+        if not (np.all(np.isfinite(st.position)) and st.position[2] > CRASH_ALTITUDE or t < 0.5):
+            reason = "crashed"
+            break
+        if np.linalg.norm(st.position - goal) < GOAL_TOLERANCE:
+            reason, time_to_goal = "goal", t
+            break
+        if t >= duration - 1e-9:
+            break
+
+        if k % plan_every == 0:
+            inp = PlannerInput(stamp=t, position=st.position.copy(), velocity=st.velocity.copy(),
+                               acceleration=accel_cmd.copy(), goal=goal,
+                               obstacles=_extrapolate(obstacles, obstacles_stamp, t), occupancy=vmap)
+            try:
+                traj = planner.plan(inp)
+                if not _finite_trajectory(traj):
+                    raise ValueError("planner returned a non-finite trajectory")
+            except Exception as e:  # noqa: BLE001 - the loop must go on: brake and hold instead
+                traj = brake_and_hold(t, st.position, st.velocity, a_max=planner_accel_limit(planner),
+                                      status=f"error:{type(e).__name__}")
+            log.add({"k": "plan", "t": round(t, 4), "status": traj.status, "ms": round(traj.solve_ms, 3),
+                     "pos": np.round(traj.positions[::2], 3).tolist(),
+                     "path": None if getattr(planner, "path", None) is None else np.round(planner.path, 2).tolist(),
+                     "n_obst": len(inp.obstacles)})
+
+        p_ref, v_ref, a_ref = traj.sample(t)
+        accel_cmd = a_ref
+        want = traj.yaw
+        if want is None:
+            d = traj.sample(t + 1.0)[0][:2] - st.position[:2]
+            want = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else yaw
+        err = (want - yaw + math.pi) % (2 * math.pi) - math.pi
+        step = cfg.max_yaw_rate * control_dt
+        yaw_rate = float(np.clip(err, -step, step)) / control_dt
+        yaw = yaw + yaw_rate * control_dt
+        ref = Reference(position=p_ref, velocity=v_ref, acceleration=a_ref, yaw=yaw, yaw_rate=yaw_rate)
+
+        frame = world.step(ref)
+        truth = world.ground_truth() if frame is not None else truth
+        k += 1
+        cl = world.clearance_log[-1]
+        log.add({"k": "s", "t": round(world.time, 5), "p": r4(world.state().position), "v": r4(world.state().velocity),
+                 "r": r4(p_ref), "c": [round(min(x, 9.0), 4) for x in cl[1:]]})
+        for ev in world.collisions[n_collisions:]:
+            log.add({"k": "collision", "t": round(ev.time, 5), "kind": ev.other_kind, "other_id": ev.other_id,
+                     "position": r4(ev.position)})
+        n_collisions = len(world.collisions)
+
+    log.add({"k": "end", "t": round(world.time, 5), "reason": reason, "reached_goal": reason == "goal",
+             "time_to_goal": None if time_to_goal is None else round(time_to_goal, 5)})
+    summary = summarize(log.records)
+    summary["map_voxels_occupied"] = int(vmap.occupied_count())
+    return summary
+
+
+def planner_accel_limit(planner) -> float:
+    """The deceleration of the brake-and-hold fallback: the planner's own limit if it has one."""
+    cfg = getattr(getattr(planner, "mpc", None), "cfg", None)
+    return float(getattr(cfg, "a_max_xy", 2.0))

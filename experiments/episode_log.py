@@ -1,0 +1,69 @@
+"""The episode log: one gzip-compressed JSON record per line, written as the episode runs.
+
+Record kinds (field ``k``):
+- ``header``: scenario, seed, perception mode, rates, corridor, static obstacles, start, goal.
+- ``s`` (every control period): t, drone position p, velocity v, reference position r,
+  clearance c = [static, person, structure] (m, capped).
+- ``f`` (every camera frame): t, drone attitude q (x, y, z, w), tracks reported by perception,
+  people from ground truth, perception and map time (ms).
+- ``plan`` (every planning period): t, planned positions, status, solve time, global path.
+- ``map`` (every ``map_snapshot_period``): occupied voxel centres as integer voxel indices.
+- ``collision``: a collision event.
+- ``end``: why the episode ended.
+
+Metrics and viewers read this file after the run (``read_log``); nothing computed during the
+run is needed to evaluate it.
+"""
+from __future__ import annotations
+
+import gzip
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def r4(a) -> list:
+    return [round(float(x), 4) for x in np.ravel(a)]
+
+
+class EpisodeLog:
+    """Keeps the records in memory and, given a path, streams them to a gzip JSON-lines file."""
+
+    def __init__(self, path: Path | None = None):
+        self.records: list[dict] = []
+        self.path = path
+        self._fh = gzip.open(path, "wt", encoding="utf-8", compresslevel=6) if path is not None else None
+
+    def add(self, record: dict) -> None:
+        self.records.append(record)
+        if self._fh is not None:
+            self._fh.write(json.dumps(record, separators=(",", ":")))
+            self._fh.write("\n")
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+def read_log(path: Path) -> list[dict]:
+    """All records of an episode log; a clear error when the file is not one."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such episode log")
+    out = []
+    try:
+        with gzip.open(path, "rt", encoding="utf-8") as fh:
+            for n, line in enumerate(fh, 1):
+                if line.strip():
+                    out.append(json.loads(line))
+    except (OSError, EOFError) as e:
+        if not out:
+            raise ValueError(f"{path}: not a gzip-compressed episode log ({e})") from None
+        # A log cut short (the run was killed): keep the complete records.
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: line {n}: not JSON ({e.msg})") from None
+    if not out or out[0].get("k") != "header":
+        raise ValueError(f"{path}: not an episode log (no header record)")
+    return out

@@ -1,0 +1,69 @@
+"""Episode metrics, computed from the log after the run (experiments.episode_log).
+
+Outcome fields are deterministic for a scenario and seed; wall-clock figures (solve and
+perception times, real-time factor) live under ``timing`` so comparisons can leave them out.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _stats(values) -> dict:
+    a = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    if a.size == 0:
+        return {"n": 0}
+    return {"n": int(a.size), "median": round(float(np.median(a)), 3), "p95": round(float(np.percentile(a, 95)), 3),
+            "p99": round(float(np.percentile(a, 99)), 3), "max": round(float(a.max()), 3)}
+
+
+def summarize(records: list[dict]) -> dict:
+    header = records[0]
+    end = next((r for r in reversed(records) if r["k"] == "end"), None)
+    states = [r for r in records if r["k"] == "s"]
+    plans = [r for r in records if r["k"] == "plan"]
+    frames = [r for r in records if r["k"] == "f"]
+    collisions = [r for r in records if r["k"] == "collision"]
+
+    p = np.array([s["p"] for s in states]) if states else np.zeros((0, 3))
+    path_length = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0
+    clear = np.array([s["c"] for s in states]) if states else np.full((0, 3), np.inf)
+    min_clear = {k: (round(float(clear[:, i].min()), 4) if len(clear) else None)
+                 for i, k in enumerate(("static", "person", "structure"))}
+    finite = [v for v in min_clear.values() if v is not None]
+    min_clear["overall"] = min(finite) if finite else None
+
+    reached = bool(end and end.get("reached_goal"))
+    t_end = end["t"] if end else (states[-1]["t"] if states else 0.0)
+    time_to_goal = end.get("time_to_goal") if reached else None
+    flown = time_to_goal if reached else t_end
+    collided = bool(collisions)
+    failure = None
+    if end and end.get("reason") not in (None, "goal"):
+        failure = end["reason"]
+    elif collided:
+        failure = "collision"
+    statuses = [pl["status"] for pl in plans]
+    return {
+        "scenario": header["scenario"], "seed": header["seed"], "perception": header["perception"],
+        "planner": header.get("planner"),
+        "success": reached and not collided,
+        "reached_goal": reached, "collided": collided, "collision_count": len(collisions),
+        "collisions": [{"t": c["t"], "kind": c["kind"], "other_id": c["other_id"]} for c in collisions],
+        "timeout": bool(end and end.get("reason") == "timeout"),
+        "failure_reason": failure,
+        "time_to_goal": None if time_to_goal is None else round(time_to_goal, 3),
+        "path_length": round(path_length, 3),
+        "mean_speed": round(path_length / flown, 3) if flown and flown > 0 else 0.0,
+        "min_clearance": min_clear,
+        "sim_time": round(t_end, 3),
+        "planner_stats": {"plans": len(plans), "fallbacks": sum(s.startswith("fallback") for s in statuses),
+                          "errors": sum(s.startswith("error") for s in statuses)},
+        "perception_stats": {"frames": len(frames), "skipped": sum(1 for f in frames if f.get("skipped"))},
+        "timing": {
+            "planner_solve_ms": _stats(pl.get("ms") for pl in plans),
+            "perception_ms": _stats(f.get("perc_ms") for f in frames),
+            "map_update_ms": _stats(f.get("map_ms") for f in frames),
+        },
+    }

@@ -1,0 +1,137 @@
+"""Perception modes the closed loop can fly with, behind one small interface.
+
+A perception module receives each sensor frame (and, only if it declares
+``uses_ground_truth``, the simulator's truth for that frame) and returns a
+``PerceptionOutput``: the moving obstacles for the planner and the boxes the static map must
+clear. To plug in another detector, implement ``reset`` and ``update`` and pass an instance to
+``experiments.episode.run_episode(perception=...)``.
+
+Modes:
+- ``dodt`` (and any DODT preset name, e.g. ``dodt-no-coast``): our DODT library on the frames.
+- ``oracle``: people from ground truth, as the DODT authors' simulations use a fake detector: a
+  person is known while inside the camera's horizontal field of view within ``max_range``, and for
+  ``memory`` seconds after leaving it (perfect tracking through occlusion), with exact position,
+  size and velocity.
+- ``static-only``: no dynamic perception; people enter the map as static obstacles.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from dodt.frames import SensorFrame
+from dodt.pipeline import DODT
+from dodt.presets import PRESETS, preset
+from planner.types import ObstaclePrediction
+
+MODES = ("dodt", "oracle", "static-only")
+
+
+@dataclass(frozen=True, eq=False)
+class PerceptionOutput:
+    stamp: float
+    obstacles: tuple[ObstaclePrediction, ...]  # moving obstacles, state at ``stamp``
+    clear_boxes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()  # (center, size) the map must free
+    tracks: list[dict] = field(default_factory=list)  # everything reported, for the episode log
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    skipped: str | None = None
+
+
+class PerceptionModule(Protocol):
+    name: str
+    uses_ground_truth: bool
+
+    def reset(self) -> None: ...
+
+    def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput: ...
+
+
+class DODTPerception:
+    uses_ground_truth = False
+
+    def __init__(self, config_name: str = "dodt", learned_detector=None):
+        self.name = config_name
+        self.dodt = DODT(preset(config_name), learned_detector=learned_detector)
+
+    def reset(self) -> None:
+        self.dodt.reset()
+
+    def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
+        r = self.dodt.process(frame)
+        preds, boxes = [], []
+        for o in r.dynamic:
+            preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=o.velocity,
+                                            acceleration=o.acceleration, position_std=o.position_std))
+            boxes.append((o.center, o.size))
+        return PerceptionOutput(stamp=r.stamp, obstacles=tuple(preds), clear_boxes=tuple(boxes),
+                                tracks=[o.to_json() for o in r.obstacles], timings_ms=dict(r.timings_ms),
+                                skipped=r.skipped)
+
+
+class OraclePerception:
+    name = "oracle"
+    uses_ground_truth = True
+
+    def __init__(self, max_range: float = 5.0, memory: float = 1.0):
+        self.max_range = max_range
+        self.memory = memory
+        self.reset()
+
+    def reset(self) -> None:
+        self._last_seen: dict[int, float] = {}
+
+    def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
+        if truth is None:
+            raise ValueError("the oracle perception mode needs the simulator's ground truth")
+        K = frame.intrinsics
+        half_fov = math.atan2(max(K.cx, K.width - K.cx), K.fx)
+        T = truth.T_world_camera
+        cam, fwd = T[:3, 3], T[:3, 2]
+        heading = math.atan2(fwd[1], fwd[0])
+        preds, boxes, tracks = [], [], []
+        for o in truth.obstacles:
+            if o.kind != "person":
+                continue
+            d = o.center[:2] - cam[:2]
+            dist = float(np.hypot(*d))
+            # Seen when any part of the body is within the horizontal FOV cone and range.
+            bearing = abs((math.atan2(d[1], d[0]) - heading + math.pi) % (2 * math.pi) - math.pi)
+            widen = math.atan2(0.5 * float(np.hypot(*o.size[:2])), max(dist, 1e-6))
+            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.max_range and bearing <= half_fov + widen:
+                self._last_seen[o.id] = truth.stamp
+            seen = self._last_seen.get(o.id)
+            if seen is None or truth.stamp - seen > self.memory:
+                continue
+            preds.append(ObstaclePrediction(id=o.id, center=o.center.copy(), size=o.size.copy(),
+                                            velocity=o.velocity.copy()))
+            boxes.append((o.center.copy(), o.size.copy()))
+            tracks.append({"id": o.id, "center": [round(float(x), 4) for x in o.center],
+                           "size": [round(float(x), 4) for x in o.size],
+                           "velocity": [round(float(x), 4) for x in o.velocity], "dynamic": True,
+                           "coasting": truth.stamp > seen})
+        return PerceptionOutput(stamp=truth.stamp, obstacles=tuple(preds), clear_boxes=tuple(boxes), tracks=tracks)
+
+
+class StaticOnlyPerception:
+    name = "static-only"
+    uses_ground_truth = False
+
+    def reset(self) -> None:
+        pass
+
+    def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
+        return PerceptionOutput(stamp=frame.stamp, obstacles=())
+
+
+def make_perception(mode: str, learned_detector=None) -> PerceptionModule:
+    """A perception module by name: dodt (or any DODT preset), oracle, static-only."""
+    if mode == "oracle":
+        return OraclePerception()
+    if mode == "static-only":
+        return StaticOnlyPerception()
+    if mode in PRESETS:
+        return DODTPerception(mode, learned_detector=learned_detector)
+    raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(MODES + tuple(PRESETS))}")

@@ -1,0 +1,258 @@
+"""Navigation sweeps: many seeds of one scenario and perception mode, resumable, gated.
+
+Each finished episode's summary is appended to ``results.jsonl`` (flushed and fsynced) the moment
+it completes, so a sweep killed at any point (even ``kill -9``) loses at most the episodes that
+were running; rerunning the same command skips every seed already in the file. Logs are kept for
+failed episodes (``episodes/seed_NNNN/``), for all with ``keep_logs``.
+
+Aggregates: success, collision and timeout rates with 95 % Wilson score intervals, time to goal
+and minimum clearance distributions, per-seed outcomes (``summary.json``, ``summary.md``),
+optionally JUnit XML with one test case per seed.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+from xml.sax.saxutils import escape, quoteattr
+
+import numpy as np
+
+RESULTS = "results.jsonl"
+
+
+class SweepError(ValueError):
+    """A user mistake in a sweep request (reported in one line by the CLI)."""
+
+
+def parse_seeds(text: str) -> list[int]:
+    """'0:200' (start:stop), '3', or '1,4,9' -> sorted unique seeds."""
+    out: set[int] = set()
+    try:
+        for part in text.split(","):
+            part = part.strip()
+            if ":" in part:
+                a, b = part.split(":", 1)
+                lo, hi = int(a), int(b)
+                if hi <= lo:
+                    raise SweepError(f"--seeds: empty range {part!r} (stop must be greater than start)")
+                out.update(range(lo, hi))
+            elif part:
+                out.add(int(part))
+    except ValueError as e:
+        if isinstance(e, SweepError):
+            raise
+        raise SweepError(f"--seeds: {text!r} is not a seed list (examples: 0:200, 5, 1,4,9)") from None
+    if not out or min(out) < 0:
+        raise SweepError(f"--seeds: {text!r}: seeds must be non-negative integers")
+    return sorted(out)
+
+
+def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion k/n."""
+    if n == 0:
+        return (0.0, 1.0)
+    ph = k / n
+    den = 1 + z * z / n
+    mid = (ph + z * z / (2 * n)) / den
+    half = z * math.sqrt(ph * (1 - ph) / n + z * z / (4 * n * n)) / den
+    return (max(0.0, mid - half), min(1.0, mid + half))
+
+
+def run_one(scenario: str, seed: int, perception: str, episodes_dir: str, keep_log: bool) -> dict:
+    """One episode in a worker (module-level so process pools and Dask can ship it)."""
+    from experiments.episode import run_episode
+
+    out = Path(episodes_dir) / f"seed_{seed:04d}"
+    s = run_episode(scenario, seed=seed, perception=perception, out=out)
+    if s["success"] and not keep_log:
+        shutil.rmtree(out, ignore_errors=True)
+    return s
+
+
+def read_results(path: Path) -> dict[int, dict]:
+    """Seed -> summary from a results file; a line cut short by a kill is ignored."""
+    done: dict[int, dict] = {}
+    if not path.exists():
+        return done
+    with open(path, encoding="utf-8") as fh:
+        for line in fh:
+            try:
+                r = json.loads(line)
+            except json.JSONDecodeError:
+                continue  # the last line of a killed run
+            if isinstance(r, dict) and "seed" in r:
+                done[int(r["seed"])] = r
+    return done
+
+
+def _append(path: Path, summary: dict) -> None:
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write(json.dumps(summary, separators=(",", ":")) + "\n")
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+class _Progress:
+    def __init__(self, total: int, done: int, stream=sys.stderr):
+        self.total, self.done, self.stream = total, done, stream
+        self.t0 = time.perf_counter()
+        self.new = 0
+        self.failures = 0
+
+    def tick(self, s: dict) -> None:
+        self.done += 1
+        self.new += 1
+        self.failures += not s["success"]
+        el = time.perf_counter() - self.t0
+        eta = el / self.new * (self.total - self.done)
+        w = 30
+        fill = int(w * self.done / max(self.total, 1))
+        self.stream.write(f"\r[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total} episodes, "
+                          f"{self.failures} failed, {el:.0f} s elapsed, ~{eta:.0f} s left ")
+        self.stream.flush()
+
+    def close(self) -> None:
+        self.stream.write("\n")
+        self.stream.flush()
+
+
+def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs: int = 1,
+              dask_address: str | None = None, keep_logs: bool = False, progress: bool = True) -> dict:
+    """Run the seeds not yet in ``out/results.jsonl``; return the aggregate over all requested seeds."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    res_path = out / RESULTS
+    done = read_results(res_path)
+    clash = [s for s in done.values() if s.get("perception") != perception]
+    if clash:
+        raise SweepError(f"{res_path}: holds results of perception {clash[0].get('perception')!r}, not "
+                         f"{perception!r}; use another --out folder")
+    todo = [s for s in seeds if s not in done]
+    episodes_dir = str(out / "episodes")
+    bar = _Progress(len(seeds), len(seeds) - len(todo)) if progress and todo else None
+    t0 = time.perf_counter()
+
+    def finished(s: dict) -> None:
+        _append(res_path, s)
+        done[int(s["seed"])] = s
+        if bar:
+            bar.tick(s)
+
+    if todo:
+        if dask_address:
+            _run_dask(dask_address, scenario, todo, perception, episodes_dir, keep_logs, finished)
+        elif jobs <= 1:
+            for seed in todo:
+                finished(run_one(scenario, seed, perception, episodes_dir, keep_logs))
+        else:
+            _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, finished)
+    if bar:
+        bar.close()
+    agg = aggregate([done[s] for s in seeds], scenario, perception)
+    agg["wall_s_this_run"] = round(time.perf_counter() - t0, 1)
+    (out / "summary.json").write_text(json.dumps(agg, indent=1))
+    (out / "summary.md").write_text(markdown(agg))
+    return agg
+
+
+def _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, finished) -> None:
+    import multiprocessing as mp
+
+    # spawn: every worker starts clean (PyBullet's EGL plugin and numba do not like forked parents).
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as ex:
+        pending = {ex.submit(run_one, scenario, s, perception, episodes_dir, keep_logs) for s in todo}
+        while pending:
+            ready, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in ready:
+                finished(f.result())
+
+
+def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, finished) -> None:
+    try:
+        from dask.distributed import Client, as_completed
+    except ImportError:
+        raise SweepError("--dask needs the cluster extra: pip install -e '.[cluster]'") from None
+    with Client(address) as client:
+        futures = [client.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, pure=False,
+                                 key=f"episode-{perception}-{s}") for s in todo]
+        for f in as_completed(futures):
+            finished(f.result())
+
+
+def _dist(values) -> dict:
+    a = np.asarray([v for v in values if v is not None], dtype=float)
+    if a.size == 0:
+        return {"n": 0}
+    q = np.percentile(a, [5, 25, 50, 75, 95])
+    return {"n": int(a.size), "mean": round(float(a.mean()), 3), "min": round(float(a.min()), 3),
+            "p5": round(float(q[0]), 3), "p25": round(float(q[1]), 3), "median": round(float(q[2]), 3),
+            "p75": round(float(q[3]), 3), "p95": round(float(q[4]), 3), "max": round(float(a.max()), 3)}
+
+
+def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
+    n = len(summaries)
+    counts = {"success": sum(s["success"] for s in summaries), "collision": sum(s["collided"] for s in summaries),
+              "timeout": sum(s["timeout"] for s in summaries)}
+    rates = {k: {"count": c, "rate": round(c / n, 4) if n else 0.0,
+                 "ci95": [round(x, 4) for x in wilson(c, n)]} for k, c in counts.items()}
+    return {
+        "scenario": scenario, "perception": perception, "episodes": n, "rates": rates,
+        "time_to_goal": _dist(s["time_to_goal"] for s in summaries),
+        "mean_speed": _dist(s["mean_speed"] for s in summaries if s["reached_goal"]),
+        "min_clearance_person": _dist(s["min_clearance"]["person"] for s in summaries),
+        "min_clearance_overall": _dist(s["min_clearance"]["overall"] for s in summaries),
+        "planner_fallbacks": int(sum(s["planner_stats"]["fallbacks"] for s in summaries)),
+        "per_seed": [{"seed": s["seed"], "success": s["success"], "collided": s["collided"],
+                      "collisions": s["collision_count"], "timeout": s["timeout"],
+                      "failure_reason": s["failure_reason"], "time_to_goal": s["time_to_goal"],
+                      "min_clearance": s["min_clearance"]["overall"]} for s in sorted(summaries, key=lambda s: s["seed"])],
+    }
+
+
+def markdown(agg: dict) -> str:
+    L = [f"# Sweep: {agg['scenario']}, perception {agg['perception']}, {agg['episodes']} episodes", "",
+         "| outcome | count | rate | 95 % Wilson interval |", "|---|---|---|---|"]
+    for k, r in agg["rates"].items():
+        L.append(f"| {k} | {r['count']} | {100 * r['rate']:.1f} % | {100 * r['ci95'][0]:.1f}–{100 * r['ci95'][1]:.1f} % |")
+    L += ["", "| distribution | n | mean | p5 | median | p95 | max |", "|---|---|---|---|---|---|---|"]
+    for key, label in (("time_to_goal", "time to goal [s]"), ("mean_speed", "mean speed [m/s]"),
+                       ("min_clearance_person", "min clearance to people [m]"),
+                       ("min_clearance_overall", "min clearance overall [m]")):
+        d = agg[key]
+        if d["n"]:
+            L.append(f"| {label} | {d['n']} | {d['mean']} | {d['p5']} | {d['median']} | {d['p95']} | {d['max']} |")
+    L += ["", f"Planner fallbacks over all episodes: {agg['planner_fallbacks']}", "",
+          "| seed | outcome | collisions | time to goal [s] | min clearance [m] |", "|---|---|---|---|---|"]
+    for s in agg["per_seed"]:
+        outcome = "success" if s["success"] else (s["failure_reason"] or "failure")
+        ttg = "-" if s["time_to_goal"] is None else f"{s['time_to_goal']:.2f}"
+        mc = "-" if s["min_clearance"] is None else f"{s['min_clearance']:.2f}"
+        L.append(f"| {s['seed']} | {outcome} | {s['collisions']} | {ttg} | {mc} |")
+    return "\n".join(L) + "\n"
+
+
+def junit(agg: dict, summaries_by_seed: dict[int, dict]) -> str:
+    """JUnit XML: one test case per seed; a collision or a timeout is a failure."""
+    cases = []
+    failures = 0
+    for row in agg["per_seed"]:
+        s = summaries_by_seed.get(row["seed"], {})
+        name = f"seed_{row['seed']:04d}"
+        t = s.get("sim_time", 0.0)
+        body = ""
+        if not row["success"]:
+            failures += 1
+            msg = f"{row['failure_reason'] or 'failure'}: {row['collisions']} collision(s)"
+            detail = json.dumps({k: s.get(k) for k in ("collisions", "min_clearance", "time_to_goal", "sim_time")})
+            body = f"<failure message={quoteattr(msg)}>{escape(detail)}</failure>"
+        cls = quoteattr(f"{agg['scenario']}.{agg['perception']}")
+        cases.append(f'  <testcase classname={cls} name="{name}" time="{t}">{body}</testcase>')
+    suite = quoteattr(f"dodt-nav sweep {agg['scenario']} {agg['perception']}")
+    return (f'<?xml version="1.0" encoding="UTF-8"?>\n<testsuite name={suite} tests="{len(cases)}" '
+            f'failures="{failures}" errors="0">\n' + "\n".join(cases) + "\n</testsuite>\n")

@@ -1,0 +1,213 @@
+"""Global path: A* on a 2D occupancy grid at the flight altitude, then shortcutting.
+
+The grid is the voxel map's column view (a cell is blocked when any voxel of the altitude band
+is occupied, inflated by the robot size). Unknown space counts as free: the path is optimistic
+and the MPC, which sees the map too, keeps the drone off whatever appears. The search is an
+8-connected A* with the octile-distance heuristic (admissible, so the path is shortest on the
+grid), compiled with numba: a 160 x 40 grid takes well under a millisecond.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_SQRT2 = math.sqrt(2.0)
+
+
+@njit(cache=True)
+def _heap_push(heap_f, heap_i, n, f, i):
+    heap_f[n] = f
+    heap_i[n] = i
+    k = n
+    while k > 0:
+        parent = (k - 1) // 2
+        if heap_f[parent] <= heap_f[k]:
+            break
+        heap_f[parent], heap_f[k] = heap_f[k], heap_f[parent]
+        heap_i[parent], heap_i[k] = heap_i[k], heap_i[parent]
+        k = parent
+    return n + 1
+
+
+@njit(cache=True)
+def _heap_pop(heap_f, heap_i, n):
+    top = heap_i[0]
+    n -= 1
+    heap_f[0] = heap_f[n]
+    heap_i[0] = heap_i[n]
+    k = 0
+    while True:
+        left = 2 * k + 1
+        if left >= n:
+            break
+        child = left
+        if left + 1 < n and heap_f[left + 1] < heap_f[left]:
+            child = left + 1
+        if heap_f[k] <= heap_f[child]:
+            break
+        heap_f[child], heap_f[k] = heap_f[k], heap_f[child]
+        heap_i[child], heap_i[k] = heap_i[k], heap_i[child]
+        k = child
+    return top, n
+
+
+@njit(cache=True)
+def _astar(blocked, si, sj, gi, gj):
+    """Cell indices (flattened, start first) of a shortest 8-connected path; empty if none."""
+    nx, ny = blocked.shape
+    total = nx * ny
+    g = np.full(total, np.inf)
+    parent = np.full(total, -1, dtype=np.int64)
+    closed = np.zeros(total, dtype=np.bool_)
+    cap = 8 * total + 1
+    heap_f = np.empty(cap)
+    heap_i = np.empty(cap, dtype=np.int64)
+    start, goal = si * ny + sj, gi * ny + gj
+    g[start] = 0.0
+    n = _heap_push(heap_f, heap_i, 0, 0.0, start)
+    sqrt2 = math.sqrt(2.0)
+    found = False
+    while n > 0:
+        cur, n = _heap_pop(heap_f, heap_i, n)
+        if closed[cur]:
+            continue
+        if cur == goal:
+            found = True
+            break
+        closed[cur] = True
+        ci, cj = cur // ny, cur % ny
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                if di == 0 and dj == 0:
+                    continue
+                ni, nj = ci + di, cj + dj
+                if ni < 0 or nj < 0 or ni >= nx or nj >= ny or blocked[ni, nj]:
+                    continue
+                if di != 0 and dj != 0 and (blocked[ci + di, cj] or blocked[ci, cj + dj]):
+                    continue  # no corner cutting
+                nb = ni * ny + nj
+                if closed[nb]:
+                    continue
+                step = sqrt2 if (di != 0 and dj != 0) else 1.0
+                ng = g[cur] + step
+                if ng < g[nb]:
+                    g[nb] = ng
+                    parent[nb] = cur
+                    dx, dy = abs(ni - gi), abs(nj - gj)
+                    h = (dx + dy) + (sqrt2 - 2.0) * min(dx, dy)
+                    n = _heap_push(heap_f, heap_i, n, ng + h, nb)
+    if not found:
+        return np.empty(0, dtype=np.int64)
+    count = 0
+    k = goal
+    while k != -1:
+        count += 1
+        k = parent[k]
+    out = np.empty(count, dtype=np.int64)
+    k = goal
+    for m in range(count - 1, -1, -1):
+        out[m] = k
+        k = parent[k]
+    return out
+
+
+@njit(cache=True)
+def _line_free(blocked, i0, j0, i1, j1):
+    """True if the straight segment between two cell centres crosses no blocked cell."""
+    steps = int(max(abs(i1 - i0), abs(j1 - j0)) * 2) + 1
+    for s in range(steps + 1):
+        t = s / steps
+        i = int(round(i0 + (i1 - i0) * t))
+        j = int(round(j0 + (j1 - j0) * t))
+        if blocked[i, j]:
+            return False
+    return True
+
+
+def _nearest_free(blocked: np.ndarray, i: int, j: int, max_radius: int = 15) -> tuple[int, int] | None:
+    if not blocked[i, j]:
+        return i, j
+    nx, ny = blocked.shape
+    for r in range(1, max_radius + 1):
+        i0, i1, j0, j1 = max(i - r, 0), min(i + r, nx - 1), max(j - r, 0), min(j + r, ny - 1)
+        ii, jj = np.nonzero(~blocked[i0:i1 + 1, j0:j1 + 1])
+        if len(ii):
+            d = (ii + i0 - i) ** 2 + (jj + j0 - j) ** 2
+            k = int(np.argmin(d))  # row-major order breaks ties: deterministic
+            return int(ii[k] + i0), int(jj[k] + j0)
+    return None
+
+
+def grid_path(blocked: np.ndarray, origin_xy, resolution: float, start_xy, goal_xy) -> np.ndarray | None:
+    """Shortest collision-free polyline (K, 2) in world x, y from start to goal on the grid.
+
+    ``blocked[i, j]`` covers the cell whose centre is origin + (i + 0.5, j + 0.5) * resolution.
+    A start or goal inside a blocked cell moves to the nearest free cell (the drone may sit inside
+    the inflation margin). The polyline starts at ``start_xy`` and ends at ``goal_xy`` (or the
+    nearest free cell to it); corners are shortcut where the straight line stays free. Returns
+    None when no path exists.
+    """
+    blocked = np.ascontiguousarray(blocked, dtype=np.bool_)
+    o = np.asarray(origin_xy, dtype=float)
+    nx, ny = blocked.shape
+
+    def cell(xy):
+        ij = np.floor((np.asarray(xy, dtype=float)[:2] - o) / resolution).astype(int)
+        return int(np.clip(ij[0], 0, nx - 1)), int(np.clip(ij[1], 0, ny - 1))
+
+    s = _nearest_free(blocked, *cell(start_xy))
+    g = _nearest_free(blocked, *cell(goal_xy))
+    if s is None or g is None:
+        return None
+    cells = _astar(blocked, s[0], s[1], g[0], g[1])
+    if len(cells) == 0:
+        return None
+    ij = np.stack([cells // ny, cells % ny], axis=1)
+    keep = [0]  # greedy line-of-sight shortcutting
+    while keep[-1] < len(ij) - 1:
+        a = keep[-1]
+        b = len(ij) - 1
+        while b > a + 1 and not _line_free(blocked, ij[a, 0], ij[a, 1], ij[b, 0], ij[b, 1]):
+            b -= 1
+        keep.append(b)
+    pts = o + (ij[keep] + 0.5) * resolution
+    pts[0] = np.asarray(start_xy, dtype=float)[:2]
+    if g == cell(goal_xy):
+        pts[-1] = np.asarray(goal_xy, dtype=float)[:2]
+    return pts
+
+
+class PathFollower:
+    """Arc-length view of a polyline: project a position on it and sample points ahead."""
+
+    def __init__(self, points: np.ndarray):
+        pts = np.asarray(points, dtype=float)
+        seg = np.diff(pts, axis=0)
+        keep = np.concatenate([[True], np.linalg.norm(seg, axis=1) > 1e-9])
+        self.points = pts[keep]
+        if len(self.points) == 1:
+            self.points = np.vstack([self.points, self.points[-1] + 1e-6])
+        self.seg = np.diff(self.points, axis=0)
+        self.seg_len = np.linalg.norm(self.seg, axis=1)
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
+        self.length = float(self.cum[-1])
+
+    def project(self, p) -> float:
+        """Arc length of the point of the path nearest to p (x, y)."""
+        p = np.asarray(p, dtype=float)[: self.points.shape[1]]
+        rel = p - self.points[:-1]
+        t = np.clip(np.einsum("ij,ij->i", rel, self.seg) / np.maximum(self.seg_len**2, 1e-12), 0.0, 1.0)
+        d = np.linalg.norm(rel - t[:, None] * self.seg, axis=1)
+        k = int(np.argmin(d))
+        return float(self.cum[k] + t[k] * self.seg_len[k])
+
+    def at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points (K, D) and unit tangents (K, D) at arc lengths s (clipped to the path)."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
+        k = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.seg) - 1)
+        frac = (s - self.cum[k]) / np.maximum(self.seg_len[k], 1e-12)
+        pts = self.points[k] + frac[:, None] * self.seg[k]
+        tang = self.seg[k] / np.maximum(self.seg_len[k], 1e-12)[:, None]
+        return pts, tang

@@ -1,0 +1,153 @@
+"""The planner the closed loop flies by default: global A* path on the voxel map, MPC along it.
+
+Every call: (1) every ``path_period`` seconds, or sooner when the current path runs into newly
+occupied cells, an A* path to the goal on the map's column grid at the flight altitude;
+(2) a reference for the MPC horizon sampled along that path at the cruise speed, slowing down to
+stop at the goal; (3) the MPC over the predicted moving obstacles and the occupied voxels near the
+drone. The heading is toward a point ``look_ahead`` metres further on the path, so the camera
+looks where the drone is going rather than where it is dodging.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.global_path import PathFollower, grid_path
+from planner.mpc import MPC, MPCConfig
+from planner.types import PlannerInput, Trajectory
+
+
+@dataclass(frozen=True)
+class NavigatorConfig:
+    cruise_speed: float = 1.5  # m/s; reference autonomous_flight desired_velocity 1.5
+    goal_decel: float = 1.0  # m/s^2, speed profile toward the goal: v <= sqrt(2 a d)
+    band_half_height: float = 0.3  # m; the column grid covers goal altitude +- this (plus inflation)
+    path_period: float = 0.5  # s between global path searches
+    static_radius: float = 3.5  # m; occupied voxels within this horizontal box half-size reach the MPC
+    static_band: float = 0.8  # m; ... and within this height of the goal altitude
+    block_times: tuple[float, ...] = (0.0, 0.5, 1.0)  # s; moving obstacles block the path search here
+    look_ahead: float = 2.0  # m along the path for the heading
+    mpc: MPCConfig = field(default_factory=MPCConfig)
+
+
+class MPCPlanner:
+    """Implements planner.types.Planner."""
+
+    def __init__(self, cfg: NavigatorConfig = NavigatorConfig()):
+        self.cfg = cfg
+        self.mpc = MPC(cfg.mpc)
+        self.reset()
+
+    def reset(self) -> None:
+        self.mpc.reset()
+        self.follower: PathFollower | None = None
+        self._path_stamp = -math.inf
+        self._goal: np.ndarray | None = None
+        self.path_searches = 0
+        self.path_failures = 0
+
+    @property
+    def path(self) -> np.ndarray | None:
+        """The current global path (K, 2) in world x, y."""
+        return None if self.follower is None else self.follower.points
+
+    def _blocked(self, occupancy, z: float, obstacles=()):
+        """The column grid, with discs around the moving obstacles' current and near-future positions
+        blocked too: the path then passes people on the side with room, and the MPC follows it."""
+        b = occupancy.column_blocked(z - self.cfg.band_half_height, z + self.cfg.band_half_height, inflate=True)
+        if not obstacles:
+            return b
+        b = b.copy()
+        m, res = self.cfg.mpc, occupancy.cfg.resolution
+        nx, ny = b.shape
+        times = np.asarray(self.cfg.block_times)
+        for o in obstacles:
+            r = 0.5 * float(np.hypot(o.size[0], o.size[1])) + m.robot_radius + m.dynamic_margin
+            for c in o.predict(times):
+                if not np.all(np.isfinite(c)):
+                    continue
+                i0, j0 = occupancy.world_to_cell(c[None, :2] - r)[0]
+                i1, j1 = occupancy.world_to_cell(c[None, :2] + r)[0]
+                i0, j0, i1, j1 = max(i0, 0), max(j0, 0), min(i1, nx - 1), min(j1, ny - 1)
+                if i0 > i1 or j0 > j1:
+                    continue
+                ii, jj = np.mgrid[i0:i1 + 1, j0:j1 + 1]
+                centres = occupancy.cell_to_world(np.stack([ii.ravel(), jj.ravel()], axis=1))
+                inside = np.hypot(centres[:, 0] - c[0], centres[:, 1] - c[1]) <= r
+                b[ii.ravel()[inside], jj.ravel()[inside]] = True
+        return b
+
+    def _path_still_free(self, blocked, occupancy, s0: float) -> bool:
+        s = np.arange(s0, self.follower.length, occupancy.cfg.resolution)
+        if len(s) == 0:
+            return True
+        pts, _ = self.follower.at(s)
+        ij = occupancy.world_to_cell(pts)
+        ok = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < blocked.shape[0]) & (ij[:, 1] < blocked.shape[1])
+        ij = ij[ok]
+        return not bool(blocked[ij[:, 0], ij[:, 1]].any())
+
+    def _update_path(self, inp: PlannerInput) -> None:
+        goal_changed = self._goal is None or not np.array_equal(self._goal, inp.goal)
+        occ = inp.occupancy
+        if occ is None:
+            if goal_changed or self.follower is None:
+                self.follower = PathFollower(np.array([inp.position[:2], inp.goal[:2]]))
+            self._goal = np.array(inp.goal, dtype=float)
+            return
+        due = goal_changed or self.follower is None or inp.stamp - self._path_stamp >= self.cfg.path_period
+        blocked = self._blocked(occ, float(inp.goal[2]), inp.obstacles)
+        if not due:
+            due = not self._path_still_free(blocked, occ, self.follower.project(inp.position[:2]))
+        if not due:
+            return
+        self.path_searches += 1
+        pts = grid_path(blocked, occ.xy_origin, occ.cfg.resolution, inp.position[:2], inp.goal[:2])
+        if pts is None:
+            self.path_failures += 1  # keep the previous path (or the straight line): the MPC still avoids
+            if self.follower is None:
+                pts = np.array([inp.position[:2], inp.goal[:2]])
+            else:
+                pts = None
+        if pts is not None:
+            self.follower = PathFollower(pts)
+        self._path_stamp = inp.stamp
+        self._goal = np.array(inp.goal, dtype=float)
+
+    def reference(self, inp: PlannerInput) -> tuple[np.ndarray, np.ndarray]:
+        """MPC position and velocity references (N, 3) along the path."""
+        c, m = self.cfg, self.cfg.mpc
+        f = self.follower
+        s = f.project(inp.position[:2])
+        s_k = np.empty(m.horizon)
+        v_k = np.empty(m.horizon)
+        for k in range(m.horizon):
+            v = min(c.cruise_speed, math.sqrt(2.0 * c.goal_decel * max(f.length - s, 0.0)))
+            s = min(s + v * m.dt, f.length)
+            s_k[k], v_k[k] = s, v
+        pts, tang = f.at(s_k)
+        p_ref = np.column_stack([pts, np.full(m.horizon, float(inp.goal[2]))])
+        v_ref = np.column_stack([tang * v_k[:, None], np.zeros(m.horizon)])
+        return p_ref, v_ref
+
+    def plan(self, inp: PlannerInput) -> Trajectory:
+        self._update_path(inp)
+        p_ref, v_ref = self.reference(inp)
+        static = None
+        occ = inp.occupancy
+        if occ is not None:
+            r, zc, h = self.cfg.static_radius, float(inp.goal[2]), self.cfg.static_band
+            lo = np.array([inp.position[0] - r, inp.position[1] - r, zc - h])
+            hi = np.array([inp.position[0] + r, inp.position[1] + r, zc + h])
+            static = occ.occupied_centers(lo, hi)
+        res = self.mpc.solve(inp.stamp, inp.position, inp.velocity, inp.acceleration, p_ref, v_ref,
+                             obstacles=inp.obstacles, static_points=static)
+        f = self.follower
+        ahead, _ = f.at(np.array([f.project(inp.position[:2]) + self.cfg.look_ahead]))
+        d = ahead[0] - inp.position[:2]
+        yaw = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else None
+        traj = res.trajectory
+        return Trajectory(traj.t0, traj.dt, traj.positions, traj.velocities, traj.accelerations,
+                          status=traj.status, solve_ms=traj.solve_ms, yaw=yaw)

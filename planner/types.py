@@ -1,0 +1,101 @@
+"""Messages between perception, the map and planners.
+
+A planner receives an immutable snapshot (``PlannerInput``) and returns a ``Trajectory``: the
+closed loop samples that trajectory into controller references until the next plan. Moving
+obstacles reach a planner as ``ObstaclePrediction``s, whatever produced them (DODT tracks, ground
+truth, someone else's detector). Units SI, world frame (x along the corridor, y left, z up).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class ObstaclePrediction:
+    """A moving obstacle: axis-aligned box now, and how to extrapolate it.
+
+    Prediction: constant acceleration for ``accel_horizon`` seconds, constant velocity after
+    (an acceleration estimate held for several seconds sends predictions anywhere), speed capped at
+    ``max_speed``. Uncertainty: position_std now, growing by ``std_growth`` per second ahead.
+    """
+
+    id: int
+    center: np.ndarray  # (3,) [m]
+    size: np.ndarray  # (3,) [m] full extents
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,) [m/s]
+    acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,) [m/s^2]
+    position_std: float = 0.0  # [m]
+    std_growth: float = 0.1  # [m/s]
+    accel_horizon: float = 1.0  # [s]
+    max_speed: float = 2.5  # [m/s]
+
+    def predict(self, times: np.ndarray) -> np.ndarray:
+        """Centres at ``times`` seconds ahead (K,) -> (K, 3)."""
+        t = np.asarray(times, dtype=float)[:, None]
+        ta = np.minimum(t, self.accel_horizon)
+        v_end = self.velocity + self.acceleration * ta
+        speed = np.linalg.norm(v_end, axis=1, keepdims=True)
+        scale = np.where(speed > self.max_speed, self.max_speed / np.maximum(speed, 1e-9), 1.0)
+        disp = (self.velocity * ta + 0.5 * self.acceleration * ta * ta) + v_end * scale * (t - ta)
+        return self.center + disp
+
+    def std_at(self, times: np.ndarray) -> np.ndarray:
+        """Position standard deviation at ``times`` seconds ahead (K,)."""
+        return self.position_std + self.std_growth * np.asarray(times, dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Piecewise-constant acceleration: on [t0 + k dt, t0 + (k+1) dt) the acceleration is
+    accelerations[k]; positions/velocities are the knot states (N+1, 3)."""
+
+    t0: float
+    dt: float
+    positions: np.ndarray  # (N+1, 3)
+    velocities: np.ndarray  # (N+1, 3)
+    accelerations: np.ndarray  # (N, 3)
+    status: str = "solved"  # solved | fallback:<why> | hold
+    solve_ms: float = 0.0
+    yaw: float | None = None  # heading the vehicle should hold [rad]; None: face along the motion
+
+    @property
+    def duration(self) -> float:
+        return self.dt * len(self.accelerations)
+
+    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(position, velocity, acceleration) at absolute time t (held at the end)."""
+        n = len(self.accelerations)
+        tau = t - self.t0
+        if n == 0 or tau >= n * self.dt:
+            return self.positions[-1].copy(), self.velocities[-1].copy(), np.zeros(3)
+        tau = max(tau, 0.0)
+        k = min(int(tau / self.dt), n - 1)
+        s = tau - k * self.dt
+        a = self.accelerations[k]
+        v = self.velocities[k] + a * s
+        p = self.positions[k] + self.velocities[k] * s + 0.5 * a * s * s
+        return p, v, a.copy()
+
+
+@dataclass(frozen=True, eq=False)
+class PlannerInput:
+    """What a planner sees at one planning instant."""
+
+    stamp: float  # sim time [s]
+    position: np.ndarray  # (3,) estimated drone position
+    velocity: np.ndarray  # (3,)
+    acceleration: np.ndarray  # (3,) last commanded acceleration
+    goal: np.ndarray  # (3,)
+    obstacles: tuple[ObstaclePrediction, ...]  # moving obstacles
+    occupancy: object | None = None  # a planner.voxel_map.VoxelMap (static map), or None
+
+
+class Planner(Protocol):
+    """What the closed loop calls. Implement these two methods to plug in another planner."""
+
+    def reset(self) -> None: ...
+
+    def plan(self, inp: PlannerInput) -> Trajectory: ...
