@@ -83,8 +83,9 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     scenario: a Scenario or a shipped scenario name / TOML path. perception: a mode name
     (dodt, oracle, static-only, any DODT preset) or a PerceptionModule. planner: any object with
     ``reset()`` and ``plan(PlannerInput) -> Trajectory``; default the A* + MPC planner.
-    on_frame(world, perception_output, vmap, trajectory): optional callback per camera frame
-    (live viewers).
+    on_frame(view): optional callback per camera frame (live viewers); view is a dict with t, frame
+    (SensorFrame), truth (GroundTruth), perception (PerceptionOutput), map (VoxelMap), trajectory
+    (the current plan or None), T_world_body (4x4), path (the planner's global path or None).
     """
     sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
     seed = sc.seed if seed is None else int(seed)
@@ -155,7 +156,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
             n_frames += 1
             q = world.T_world_body()
             people = [o for o in truth.obstacles if o.kind == "person"]
-            log.add({"k": "f", "t": round(t, 4), "R": r4(q[:3, :3]), "tracks": po.tracks,
+            log.add({"k": "f", "t": round(t, 4), "p": r4(q[:3, 3]), "R": r4(q[:3, :3]), "tracks": po.tracks,
                      "people": [{"id": o.id, "lo": r4(o.aabb_min), "hi": r4(o.aabb_max), "v": r4(o.velocity[:2])}
                                 for o in people],
                      "perc_ms": round(perc_ms, 3), "map_ms": None if map_ms is None else round(map_ms, 3),
@@ -166,7 +167,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                 log.add({"k": "map", "t": round(t, 4), "voxels": idx[above_floor].tolist()})
                 next_snapshot = t + cfg.map_snapshot_period
             if on_frame is not None:
-                on_frame(world, po, vmap, traj)
+                on_frame({"t": t, "frame": frame, "truth": truth, "perception": po, "map": vmap, "trajectory": traj,
+                          "T_world_body": q, "path": getattr(planner, "path", None)})
 
         st = world.state()
         if not (np.all(np.isfinite(st.position)) and st.position[2] > CRASH_ALTITUDE or t < 0.5):

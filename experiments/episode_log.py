@@ -1,15 +1,20 @@
 """The episode log: one gzip-compressed JSON record per line, written as the episode runs.
 
 Record kinds (field ``k``):
-- ``header``: scenario, seed, perception mode, rates, corridor, static obstacles, start, goal.
+- ``header``: scenario, seed, perception, planner, duration, rates, corridor {length, width,
+  height}, start, goal, map_resolution, map_origin, static (truth boxes: id, kind, label,
+  aabb_min, aabb_max), people [{id, height}].
 - ``s`` (every control period): t, drone position p, velocity v, reference position r,
-  clearance c = [static, person, structure] (m, capped).
-- ``f`` (every camera frame): t, drone attitude q (x, y, z, w), tracks reported by perception,
-  people from ground truth, perception and map time (ms).
-- ``plan`` (every planning period): t, planned positions, status, solve time, global path.
-- ``map`` (every ``map_snapshot_period``): occupied voxel centres as integer voxel indices.
-- ``collision``: a collision event.
-- ``end``: why the episode ended.
+  clearance c = [static, person, structure] (m, capped at 9).
+- ``f`` (every camera frame): t, drone position p, attitude R (3x3 row-major, body FLU -> world),
+  tracks (perception's report: id, center, size, velocity, dynamic, coasting, ...), people from
+  ground truth [{id, lo, hi, v}], perc_ms, map_ms (None when the map was not updated), skipped.
+- ``plan`` (every planning period): t, status, ms (solve time), pos (every 2nd knot of the plan,
+  starting at the current position), path (the global path, (K, 2), or None), n_obst.
+- ``map`` (every ``map_snapshot_period``): voxels = occupied voxel indices above the floor; centre =
+  map_origin + (index + 0.5) * map_resolution.
+- ``collision``: t, kind (person | static | structure), other_id, position.
+- ``end``: t, reason (goal | timeout | crashed), reached_goal, time_to_goal.
 
 Metrics and viewers read this file after the run (``read_log``); nothing computed during the
 run is needed to evaluate it.
