@@ -29,6 +29,9 @@ class NavigatorConfig:
     static_band: float = 0.8  # m; ... and within this height of the goal altitude
     block_times: tuple[float, ...] = (0.0, 0.5, 1.0)  # s; moving obstacles block the path search here
     look_ahead: float = 2.0  # m along the path for the heading
+    max_heading_offset: float = 0.8  # rad; the heading stays within this of the direction to the goal, so
+    # a detour does not turn the camera away from where people come from (ours: a sideways detour
+    # at 80 deg left a person approaching from ahead unseen until it hit the drone)
     mpc: MPCConfig = field(default_factory=MPCConfig)
 
 
@@ -148,6 +151,11 @@ class MPCPlanner:
         ahead, _ = f.at(np.array([f.project(inp.position[:2]) + self.cfg.look_ahead]))
         d = ahead[0] - inp.position[:2]
         yaw = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else None
+        g = inp.goal[:2] - inp.position[:2]
+        if yaw is not None and np.hypot(*g) > 0.5:
+            to_goal = math.atan2(g[1], g[0])
+            off = (yaw - to_goal + math.pi) % (2 * math.pi) - math.pi
+            yaw = to_goal + float(np.clip(off, -self.cfg.max_heading_offset, self.cfg.max_heading_offset))
         traj = res.trajectory
         return Trajectory(traj.t0, traj.dt, traj.positions, traj.velocities, traj.accelerations,
                           status=traj.status, solve_ms=traj.solve_ms, yaw=yaw)

@@ -1,0 +1,184 @@
+"""Viewers: the HTML replay built from a real episode log (checked offline and, where Chromium is
+installed, rendered headless and looked at), and the live viewer against a real meshcat server."""
+import base64
+import gzip
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+import umsgpack
+from PIL import Image
+
+from dodt.frames import CameraIntrinsics, SensorFrame
+from experiments.episode import EpisodeConfig, run_episode
+from experiments.viz import DRONE_RGB, FLOOR_RGB, LiveViewer, build_replay_html, start_meshcat_server, \
+    stop_meshcat_server
+from sim import load_scenario
+
+VIEWER_JS_BYTES = 900_000  # meshcat's main.min.js, inlined in every page
+
+
+def _commands(html: str) -> list[dict]:
+    """The meshcat commands a page replays: base64 msgpack strings after the viewer is created
+    (our replay's list, or meshcat's static_html fetch("data:...;base64,...") calls)."""
+    tail = html[html.rindex("new MeshCat.Viewer("):]
+    out = []
+    for s in re.findall(r'(?:"|base64,)([A-Za-z0-9+/]{8,}={0,2})"', tail):
+        out.append(umsgpack.unpackb(base64.b64decode(s)))
+    return out
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def episode_log(tmp_path_factory):
+    out = tmp_path_factory.mktemp("episode")
+    run_episode("corridor", seed=0, perception="oracle", out=out, cfg=EpisodeConfig(duration=3.0))
+    return out / "log.jsonl.gz"
+
+
+@pytest.fixture(scope="module")
+def replay(episode_log, tmp_path_factory):
+    return build_replay_html(episode_log, tmp_path_factory.mktemp("replay") / "replay.html")
+
+
+def test_replay_is_one_offline_page_with_the_animated_scene(replay):
+    html = replay.read_text(encoding="utf-8")
+    assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:)?//""", html, re.I)  # nothing fetched from outside
+    assert "<script src" not in html and "import(" not in html.split("new MeshCat.Viewer(")[1]
+    # A 3 s episode: the viewer plus < 0.5 MB per episode second keeps 20 s well under 20 MB.
+    assert replay.stat().st_size < VIEWER_JS_BYTES + 3 * 500_000
+    cmds = _commands(html)
+    paths = {c["path"] for c in cmds}
+    assert {"/meshcat/drone", "/meshcat/scene/floor", "/meshcat/executed", "/meshcat/people/5"} <= paths
+    assert any(p.startswith("/meshcat/scene/obstacles/") for p in paths)
+    anims = [c for c in cmds if c["type"] == "set_animation"]
+    assert len(anims) == 1
+    clips = {a["path"]: a["clip"] for a in anims[0]["animations"]}
+    drone = clips["/meshcat/drone"]
+    assert drone["fps"] == 15 and {t["name"] for t in drone["tracks"]} == {".position", ".quaternion"}
+    xs = [k["value"][0] for t in drone["tracks"] if t["name"] == ".position" for k in t["keys"]]
+    assert len(xs) == 3 * 15 + 1 and xs[-1] > xs[0] + 1.0  # the drone flies down the corridor
+    assert any(p.startswith("/meshcat/tracks/dynamic/") for p in clips)  # the oracle reports people
+    cam = [c for c in cmds if c["path"] == "/Cameras/default/rotated/<object>"]
+    assert cam and cam[0]["property"] == "position"
+
+
+def _screenshot(chromium: str, page, png, profile) -> np.ndarray:
+    """What headless Chromium (software WebGL) shows of ``page`` (a file path or a URL) at 800x600."""
+    cmd = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
+           "--hide-scrollbars", "--virtual-time-budget=4000", "--window-size=800,600", f"--user-data-dir={profile}",
+           f"--screenshot={png}", page if isinstance(page, str) else page.resolve().as_uri()]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    assert png.is_file(), f"chromium wrote no screenshot (status {r.returncode}): {r.stderr[-2000:]}"
+    return np.asarray(Image.open(png).convert("RGB")).astype(int)
+
+
+def _drone_pixels(im) -> int:
+    r, gr, b = im[..., 0], im[..., 1], im[..., 2]  # magenta, also seen through a translucent wall
+    return int(np.count_nonzero((r > 150) & (b > 150) & (gr < 0.6 * np.minimum(r, b))))
+
+
+def _floor_pixels(im) -> int:
+    r, gr, b = im[..., 0], im[..., 1], im[..., 2]  # sand: red >= green >= blue + 30, unlike anything else
+    return int(np.count_nonzero((r > 150) & (b > 60) & (r >= gr) & (gr >= b + 30) & (r - b >= 45)))
+
+
+@pytest.mark.skipif(_chromium() is None, reason="no chromium binary (CI: apt-get install -y chromium)")
+def test_replay_screenshot_in_headless_chromium_shows_corridor_and_drone(replay, tmp_path):
+    im = _screenshot(_chromium(), replay, tmp_path / "replay.png", tmp_path / "profile")
+    assert im.shape == (600, 800, 3)
+    assert len(np.unique(im.reshape(-1, 3), axis=0)) > 1500  # the background alone is one gradient
+    assert DRONE_RGB == (255, 0, 255) and FLOOR_RGB == (200, 180, 120)  # what the classifiers look for
+    assert _drone_pixels(im) >= 30
+    assert _floor_pixels(im) >= 5000
+    # The same page with no scene drawn fails all three checks: they test the drawing.
+    html = replay.read_text(encoding="utf-8")
+    head, tail = html.split("new MeshCat.Viewer(")
+    empty = tmp_path / "empty.html"
+    empty.write_text(head + "new MeshCat.Viewer(" + re.sub(r'"[A-Za-z0-9+/=]{8,}"', '""', tail), encoding="utf-8")
+    blank = _screenshot(_chromium(), empty, tmp_path / "empty.png", tmp_path / "profile")
+    assert len(np.unique(blank.reshape(-1, 3), axis=0)) <= 1500
+    assert _drone_pixels(blank) < 30 and _floor_pixels(blank) < 500  # (a few from the legend's text)
+
+
+def test_replay_bad_input_names_the_file(tmp_path):
+    missing = tmp_path / "nope.jsonl.gz"
+    with pytest.raises(FileNotFoundError, match="nope.jsonl.gz"):
+        build_replay_html(missing, tmp_path / "a.html")
+    text = tmp_path / "notes.txt"
+    text.write_text("hello\n")
+    with pytest.raises(ValueError, match="notes.txt"):
+        build_replay_html(text, tmp_path / "a.html")
+    header_only = tmp_path / "short.jsonl.gz"
+    with gzip.open(header_only, "wt") as fh:
+        fh.write('{"k": "header", "corridor": {"length": 5, "width": 2, "height": 2}}\n')
+    with pytest.raises(ValueError, match="short.jsonl.gz.*no camera frame"):
+        build_replay_html(header_only, tmp_path / "a.html")
+    assert not (tmp_path / "a.html").exists()
+
+
+def test_depth_cloud_is_capped_and_in_world_coordinates():
+    intr = CameraIntrinsics()
+    depth = np.full((intr.height, intr.width), 2000, np.uint16)
+    depth[:10] = 0  # invalid pixels are left out
+    T = np.eye(4)
+    T[:3, 3] = [1.0, 2.0, 3.0]
+    pts = LiveViewer.cloud(SensorFrame(depth=depth, color=None, intrinsics=intr, T_world_camera=T, stamp=0.0), 5000)
+    assert 3000 < len(pts) <= 5000
+    np.testing.assert_allclose(pts[:, 2], 5.0)
+
+
+def _listen_addresses(port: int) -> set[str]:
+    """Local addresses with a listening TCP socket on ``port`` (from /proc/net/tcp and tcp6)."""
+    out = set()
+    for name in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = open(name).read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            local, state = line.split()[1], line.split()[3]
+            addr, p = local.split(":")
+            if state == "0A" and int(p, 16) == port:
+                out.add(addr)
+    return out
+
+
+def test_live_viewer_streams_an_episode_to_a_local_meshcat_server(tmp_path):
+    sc = load_scenario("corridor")
+    with LiveViewer(corridor=sc.corridor, goal=sc.drone.goal, quiet=True) as viewer:
+        run_episode(sc, seed=0, perception="oracle", cfg=EpisodeConfig(duration=1.0), on_frame=viewer)
+        assert viewer.failed is None
+        m = re.match(r"http://127\.0\.0\.1:(\d+)/static/", viewer.url)
+        assert m, viewer.url
+        assert _listen_addresses(int(m.group(1))) <= {"0100007F"}  # browsers: loopback only
+        html = viewer.vis.static_html()
+        proc = viewer.proc
+        if _chromium() is not None:  # a browser on the live page gets the scene over the websocket
+            im = _screenshot(_chromium(), viewer.url, tmp_path / "live.png", tmp_path / "profile")
+            assert _drone_pixels(im) >= 30 and _floor_pixels(im) >= 5000
+    assert proc.poll() is not None  # close() stopped the server it started
+    paths = {c["path"] for c in _commands(html)}
+    assert {"/meshcat/drone", "/meshcat/scene/floor", "/meshcat/scene/walls/left", "/meshcat/executed",
+            "/meshcat/planned", "/meshcat/tracks", "/meshcat/people_trails", "/meshcat/cloud",
+            "/meshcat/voxels"} <= paths
+    assert any(p.startswith("/meshcat/people/") for p in paths)
+    assert any(p.startswith("/meshcat/scene/obstacles/") for p in paths)
+
+
+def test_live_viewer_uses_a_running_server_and_leaves_it_running():
+    proc, zmq_url, _ = start_meshcat_server()
+    try:
+        viewer = LiveViewer(zmq_url=zmq_url, quiet=True)
+        assert viewer.proc is None
+        viewer.close()
+        assert proc.poll() is None
+        with pytest.raises(ConnectionError, match="tcp://127.0.0.1:1"):
+            LiveViewer(zmq_url="tcp://127.0.0.1:1", quiet=True, timeout=0.3)
+    finally:
+        stop_meshcat_server(proc)
