@@ -76,8 +76,20 @@ def _cmd_run(args) -> int:
         raise UserError(f"--perception: unknown mode {args.perception!r}; known: {known}")
     if args.duration is not None and args.duration <= 0:
         raise UserError("--duration: must be > 0")
-    s = run_episode(sc, seed=args.seed, perception=args.perception, out=Path(args.out),
-                    cfg=EpisodeConfig(duration=args.duration), renderer=args.renderer)
+    out = Path(args.out)
+    viewer = None
+    if args.viz == "live":
+        from experiments.viz import LiveViewer
+
+        viewer = LiveViewer(corridor=sc.corridor, goal=sc.drone.goal)
+    try:
+        s = run_episode(sc, seed=args.seed, perception=args.perception, out=out,
+                        cfg=EpisodeConfig(duration=args.duration), renderer=args.renderer, on_frame=viewer)
+        if viewer is not None and not args.no_wait and sys.stdin.isatty():
+            input("episode finished; press Enter to stop the meshcat viewer ")
+    finally:
+        if viewer is not None:
+            viewer.close()
     outcome = "success" if s["success"] else f"failure ({s['failure_reason']})"
     ttg = f"{s['time_to_goal']:.2f} s" if s["time_to_goal"] is not None else "-"
     mc = s["min_clearance"]
@@ -89,6 +101,43 @@ def _cmd_run(args) -> int:
           f"fallbacks {s['planner_stats']['fallbacks']}; perception median {tm['perception_ms'].get('median', '-')} ms; "
           f"{s['sim_time']:.1f} s simulated in {tm['wall_s']:.1f} s ({tm['real_time_factor']}x real time)")
     print(f"wrote {args.out}/summary.json and {args.out}/log.jsonl.gz")
+    if args.viz == "html":
+        from experiments.viz import build_replay_html
+
+        html = build_replay_html(out / "log.jsonl.gz", out / "replay.html")
+        print(f"wrote {html} ({html.stat().st_size / 1e6:.1f} MB; opens offline in a browser)")
+    if args.plots:
+        from experiments.plots import plot_episode
+
+        files = plot_episode(out / "log.jsonl.gz", out)
+        print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _cmd_replay(args) -> int:
+    from experiments.viz import build_replay_html
+
+    out = Path(args.out) if args.out else Path(args.log).with_name("replay.html")
+    try:
+        html = build_replay_html(Path(args.log), out)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    print(f"wrote {html} ({html.stat().st_size / 1e6:.1f} MB; opens offline in a browser)")
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    from experiments.plots import plot_episode, plot_sweep
+
+    src = Path(args.source)
+    try:
+        if (src / "results.jsonl").exists() or src.name == "results.jsonl":
+            files = plot_sweep(src, Path(args.out or (src if src.is_dir() else src.parent)))
+        else:
+            files = plot_episode(src, Path(args.out or (src if src.is_dir() else src.parent)))
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    print("wrote " + ", ".join(str(f) for f in files))
     return 0
 
 
@@ -179,7 +228,21 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--duration", type=float, default=None, help="time limit in seconds (default: the scenario's)")
     r.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
+    r.add_argument("--viz", choices=("live", "html"), default=None,
+                   help="live: stream to a meshcat server on 127.0.0.1; html: write OUT/replay.html")
+    r.add_argument("--no-wait", action="store_true", help="live: close the viewer when the episode ends")
+    r.add_argument("--plots", action="store_true", help="write PNG figures of the episode into OUT")
     r.set_defaults(func=_cmd_run)
+
+    rp = sub.add_parser("replay", help="build the self-contained HTML replay of a saved episode log")
+    rp.add_argument("log", help="an episode's log.jsonl.gz")
+    rp.add_argument("--out", default=None, help="HTML file (default: replay.html beside the log)")
+    rp.set_defaults(func=_cmd_replay)
+
+    pl = sub.add_parser("plot", help="PNG figures of an episode (run folder or log) or a sweep (sweep folder)")
+    pl.add_argument("source", help="an episode folder / log.jsonl.gz, or a sweep folder / results.jsonl")
+    pl.add_argument("--out", default=None, help="folder for the PNGs (default: beside the source)")
+    pl.set_defaults(func=_cmd_plot)
 
     w = sub.add_parser("sweep", help="run many seeds in parallel; resumable; rates with Wilson intervals; CI gate")
     w.add_argument("scenario", help="a scenario file, or the name of a shipped one")
@@ -212,7 +275,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dodt-nav: error: {e}", file=sys.stderr)
         return 2
     except OSError as e:
-        print(f"dodt-nav: error: {e.filename or ''}: {e.strerror}", file=sys.stderr)
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"dodt-nav: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("dodt-nav: interrupted", file=sys.stderr)
