@@ -177,6 +177,15 @@ def _cmd_sweep(args) -> int:
     return 0
 
 
+def _cmd_reproduce(args) -> int:
+    from experiments.reproduce import reproduce
+
+    if args.jobs < 1:
+        raise UserError("--jobs: must be >= 1")
+    reproduce(Path(args.out), quick=args.quick, jobs=args.jobs)
+    return 0
+
+
 def _cmd_scenarios(args) -> int:
     for name in shipped_scenarios():
         sc = load_scenario(name)
@@ -257,6 +266,12 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--keep-logs", action="store_true", help="keep the episode logs of successful episodes too")
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     w.set_defaults(func=_cmd_sweep)
+
+    rep = sub.add_parser("reproduce", help="Table I, Table II and the corridor sweeps in one report.md")
+    rep.add_argument("--out", required=True, help="output folder (rerun to resume the sweeps)")
+    rep.add_argument("--quick", action="store_true", help="a small version that finishes in minutes")
+    rep.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes")
+    rep.set_defaults(func=_cmd_reproduce)
 
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)
