@@ -183,7 +183,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
         if k % plan_every == 0:
             inp = PlannerInput(stamp=t, position=st.position.copy(), velocity=st.velocity.copy(),
                                acceleration=accel_cmd.copy(), goal=goal,
-                               obstacles=_extrapolate(obstacles, obstacles_stamp, t), occupancy=vmap)
+                               obstacles=_extrapolate(obstacles, obstacles_stamp, t), occupancy=vmap,
+                               yaw=st.yaw)
             try:
                 traj = planner.plan(inp)
                 if not _finite_trajectory(traj):

@@ -20,6 +20,9 @@ static slack per step, both >= 0 and in metres.
         points behind the plane through q are dropped, repeat up to K_s times. Where c_k is closer than
         that to a voxel (the previous plan runs through it), c_k is first slid sideways to the nearest
         clear spot: planes from a clear point are consistent (it satisfies them all) and lead around.
+    (6) Optional field of view: for k <= K_fov the horizontal velocity stays in the camera's cone,
+        (+-n - tan(th) h) . v_k <= eps (h the heading, n its left normal): the drone moves into space
+        its camera sees, up to eps = fov_free_speed in other directions.
 P and the sparsity pattern of A are fixed at construction (room for max_dynamic + K_s rows per
 step); every call only updates q, l, u and the values of A, warm-started from the previous
 solution shifted in time. Obstacle predictions are taken to start at the planning time t0.
@@ -57,6 +60,11 @@ class MPCConfig:
     w_jerk: float = 1.0  # (a_k - a_{k-1}); ours, smooths the commanded acceleration
     w_slack_lin: float = 500.0  # per metre; ours: an exact penalty (above the tracking multipliers; 200 is not)
     w_slack_quad: float = 5e3  # per metre^2; ours (Intent-MPC 100/1000 on unscaled slack); larger: more ADMM iterations
+    fov_half_angle: float | None = 0.7  # rad; constraint (6): fly only where the camera looks (D435 depth
+    # HFOV 87 deg: +-43.5, less a margin); None: off. Ours, after corridor episodes where sideways dodges
+    # at 2 m/s ran into walls and people the camera had never seen (Intent-MPC has optional FOV planes)
+    fov_steps: int = 10  # steps (1 s) under the FOV constraint; later ones may assume the heading has turned
+    fov_free_speed: float = 0.3  # m/s allowed in any direction (backing off, small corrections)
     static_slack_scale: float = 10.0  # static slack costs this many times the dynamic one: squeezed between a
     # person and a wall, the plan eats into the person's margin (which holds its uncertainty), not the wall's;
     # ours, after a corridor episode where equal weights put the drone against the wall
@@ -107,7 +115,8 @@ class MPC:
         self.N, self.n = N, 11 * N
         self._iu, self._isd, self._iss = 6 * N, 9 * N, 10 * N
         self._rd, self._rs = 15 * N, 15 * N + Md * N  # first dynamic / static obstacle row
-        self.m = self._rs + Ks * N
+        self._rf = self._rs + Ks * N  # first field-of-view row (2 per step)
+        self.m = self._rf + 2 * N
         ix = 6 * np.arange(N)  # column of p_k (k = 1..N)
         iu = self._iu + 3 * np.arange(N)  # column of u_k (k = 0..N-1)
         # P: 1/2 z'Pz + q'z with P = 2 W (upper triangle)
@@ -151,6 +160,8 @@ class MPC:
         rs = self._rs + Ks * kk + np.arange(Ks)[None, :, None]
         sta = add(rs + 0 * i[None], ix[:, None, None] + i[None], 0.0)
         add(rs[..., 0], self._iss + kk[..., 0] + 0 * np.arange(Ks), 1.0)
+        rf = self._rf + 2 * kk + np.arange(2)[None, :, None]  # (N, 2, 1) rows; columns v_x, v_y of x_{k+1}
+        fov = add(rf + 0 * i[None, :, :2], ix[:, None, None] + 3 + i[None, :, :2], 0.0)
         R, C, V = np.concatenate(R), np.concatenate(C), np.concatenate(V)
         A = sp.csc_matrix((np.arange(1, len(R) + 1, dtype=float), (R, C)), (self.m, self.n))
         A.sort_indices()
@@ -158,6 +169,7 @@ class MPC:
         pos = np.argsort(order)  # COO entry -> CSC slot
         A.data = V[order]  # explicit zeros stay in the pattern
         self._Ax0, self._dyn_pos, self._sta_pos = A.data.copy(), pos[dyn], pos[sta]  # (N, Md, 3), (N, Ks, 3)
+        self._fov_pos = pos[fov]  # (N, 2, 2)
         self._vmax = vmax = np.array([c.v_max_xy, c.v_max_xy, c.v_max_z])
         self._amax = amax = np.array([c.a_max_xy, c.a_max_xy, c.a_max_z])
         vb = vmax - c.backoff
@@ -166,7 +178,7 @@ class MPC:
         self._l0 = np.r_[np.zeros(6 * N), lb, np.full(self.m - 15 * N, -np.inf)]
         self._u0 = np.r_[np.zeros(6 * N), ub, np.full(self.m - 15 * N, np.inf)]
         self._xblocks = [(0, 6), (self._iu, 3), (self._isd, 1), (self._iss, 1)]
-        self._yblocks = [(0, 6), (6 * N, 9), (self._rd, Md), (self._rs, Ks)]
+        self._yblocks = [(0, 6), (6 * N, 9), (self._rd, Md), (self._rs, Ks), (self._rf, 2)]
         self.solver = osqp.OSQP()
         self.solver.setup(self.P, np.zeros(self.n), A, self._l0, self._u0, eps_abs=c.eps_abs, eps_rel=c.eps_rel,
                           max_iter=c.max_iter, polishing=False, warm_starting=True, verbose=False, rho=c.rho,
@@ -256,7 +268,7 @@ class MPC:
         s = np.where(shift[0] <= shift[1], shift[0], -shift[1])
         return c + np.where(np.abs(s) <= self.cfg.static_radius, s, 0.0)[:, None] * side
 
-    def _static_rows(self, c, pts, side):
+    def _static_rows(self, c, pts, side, p0):
         """(5): greedy separating planes, normals (N, Ks, 3) (zeros where unused) and rhs (N, Ks).
         Written for numpy speed on thousands of points: matrix products against the contiguous (3, M)
         transpose, masks combined as booleans, never a masked float assignment."""
@@ -293,6 +305,16 @@ class MPC:
                 break
             q = pts[idx]
             nv = c - q
+            # A linearisation point beyond the voxel, seen from the drone (the previous plan went through a
+            # wall on slack), would give a plane keeping the plan beyond the wall: where the straight
+            # line from the drone to c_k passes within the clearance of q, orient the plane from the
+            # drone's position instead, which is on the free side. (A plan through a gap passes its
+            # edge voxels farther than that and keeps its planes.)
+            seg = c - p0
+            w = np.clip(np.sum((q - p0) * seg, axis=1) / np.maximum(np.sum(seg * seg, axis=1), 1e-12), 0.0, 1.0)
+            crosses = np.linalg.norm(p0 + w[:, None] * seg - q, axis=1) < req
+            behind = crosses & (np.sum(nv * (p0 - q), axis=1) < 0.0)
+            nv[behind] = (p0 - q)[behind]
             nn = np.linalg.norm(nv, axis=1)
             nv[nn < 1e-9], nn[nn < 1e-9] = side, 1.0  # c_k on a voxel centre (no clear spot found): left
             n = nv / nn[:, None]
@@ -301,8 +323,27 @@ class MPC:
             dead |= (n @ PT) <= nq[:, None] + 1e-9  # points behind the plane through q: covered
         return n_out, b_out
 
-    def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None) -> MPCResult:
-        """One receding-horizon plan from (position, velocity) at time t0; see the module docstring."""
+    def _fov_rows(self, heading, v0):
+        """(6): rows (K, 2, 2) and upper bounds (K,) keeping the horizontal velocity of steps 1..K inside
+        the cone of half-angle fov_half_angle around the heading, up to fov_free_speed in any direction:
+        (+-n - tan(th) h) . v <= eps. A start outside the cone may return to it at half the acceleration
+        limit (the bound relaxes by the excess, shrinking step by step), so the constraint never makes the
+        QP infeasible by itself."""
+        cfg = self.cfg
+        K = min(cfg.fov_steps, self.N)
+        h = np.array([math.cos(heading), math.sin(heading)])
+        n = np.array([-h[1], h[0]])
+        tt = math.tan(cfg.fov_half_angle)
+        rows = np.array([n - tt * h, -n - tt * h])
+        excess = max(float(np.max(rows @ v0[:2])) - cfg.fov_free_speed, 0.0)
+        relax = np.maximum(excess - 0.5 * cfg.a_max_xy * cfg.dt * np.arange(1, K + 1), 0.0)
+        return np.broadcast_to(rows, (K, 2, 2)), cfg.fov_free_speed + relax
+
+    def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None,
+              heading: float | None = None) -> MPCResult:
+        """One receding-horizon plan from (position, velocity) at time t0; see the module docstring.
+        heading: the camera's current yaw [rad]; with it (and fov_half_angle set) the first fov_steps
+        velocities stay inside the camera's horizontal view (constraint 6)."""
         tic = time.perf_counter()
         cfg, N, dt = self.cfg, self.N, self.cfg.dt
         p0, v0, a0 = (np.asarray(x, dtype=float).reshape(3) for x in (position, velocity, acceleration))
@@ -350,15 +391,19 @@ class MPC:
         iters = 0
         for _ in range(max(1, cfg.iterations)):
             nd, bd = self._dynamic_rows(c, obs, p0, side)
-            ns, bs = self._static_rows(c, pts, side)
+            ns, bs = self._static_rows(c, pts, side, p0)
             nd[~np.isfinite(bd)], bd[~np.isfinite(bd)] = 0.0, -np.inf  # overflow from absurd inputs: row unused
             ns[~np.isfinite(bs)], bs[~np.isfinite(bs)] = 0.0, -np.inf
             J = nd.shape[1]
             Ax = self._Ax0.copy()
             Ax[self._dyn_pos[:, :J]] = nd
             Ax[self._sta_pos] = ns
+            if heading is not None and cfg.fov_half_angle is not None and math.isfinite(heading):
+                fr, fb = self._fov_rows(heading, v0)
+                Ax[self._fov_pos[:len(fb)]] = fr
+                u[self._rf:self._rf + 2 * len(fb)] = np.repeat(fb, 2)
             l[self._rd:self._rs].reshape(N, -1)[:, :J] = bd
-            l[self._rs:] = bs.ravel()
+            l[self._rs:self._rf] = bs.ravel()
             self.solver.update(q=q, l=l, u=u, Ax=Ax)
             self.solver.warm_start(x=zw, y=yw)
             res = self.solver.solve(raise_error=False)

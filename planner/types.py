@@ -91,6 +91,7 @@ class PlannerInput:
     goal: np.ndarray  # (3,)
     obstacles: tuple[ObstaclePrediction, ...]  # moving obstacles
     occupancy: object | None = None  # a planner.voxel_map.VoxelMap (static map), or None
+    yaw: float | None = None  # current heading of the vehicle (and its forward camera) [rad]
 
 
 class Planner(Protocol):
