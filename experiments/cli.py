@@ -57,6 +57,25 @@ def _cmd_bench(args) -> int:
         duration = args.duration if args.duration else (6.0 if args.quick else None)
         bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration)
         return 0
+    if args.what == "planner":
+        from planner.mpc import bench_mpc
+        from planner.voxel_map import bench_update
+
+        bench_update()
+        for seed in range(3):
+            bench_mpc(seed=seed)
+        return 0
+    if args.what == "loop":
+        from experiments.episode import EpisodeConfig, run_episode
+
+        sc = load_scenario(args.scenario or "corridor")
+        s = run_episode(sc, seed=0, perception=args.config, cfg=EpisodeConfig(duration=args.seconds))
+        tm = s["timing"]
+        print(f"closed loop, {sc.name} seed 0, perception {args.config}: {s['sim_time']:.1f} s simulated in "
+              f"{tm['wall_s']:.1f} s = {tm['real_time_factor']}x real time ({tm['renderer']} renderer, one process)")
+        for k in ("perception_ms", "map_update_ms", "planner_solve_ms"):
+            print(f"  {k}: median {tm[k].get('median')} ms, p95 {tm[k].get('p95')} ms, p99 {tm[k].get('p99')} ms")
+        return 0
     from experiments import bench_perception
 
     load_scenario(args.scenario or "corridor")
@@ -215,8 +234,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_simulate)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=("sim", "perception", "runtime"),
-                   help="sim: render/physics/real-time; perception: Table I; runtime: Table II")
+    b.add_argument("what", choices=("sim", "perception", "runtime", "planner", "loop"),
+                   help="sim: render/physics/real-time; perception: Table I; runtime: Table II; planner: voxel map "
+                        "update and MPC solve times; loop: real-time factor of a closed-loop episode")
     b.add_argument("--scenario", default=None, help="sim, runtime: the scenario (default corridor)")
     b.add_argument("--seconds", type=float, default=10.0, help="simulated seconds (sim: real-time figure; runtime: frames)")
     b.add_argument("--out", default="runs/bench_perception", help="perception: output folder")
@@ -225,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--configs", default=None, help="perception: comma-separated configurations")
     b.add_argument("--duration", type=float, default=None, help="perception: seconds per scenario")
     b.add_argument("--quick", action="store_true", help="perception: 6 s per scenario")
-    b.add_argument("--config", default="dodt", help="runtime: the configuration")
+    b.add_argument("--config", default="dodt", help="runtime: the configuration; loop: the perception mode")
     b.add_argument("--frames", type=int, default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     b.set_defaults(func=_cmd_bench)
