@@ -39,11 +39,11 @@ def summarize(records: list[dict]) -> dict:
     time_to_goal = end.get("time_to_goal") if reached else None
     flown = time_to_goal if reached else t_end
     collided = bool(collisions)
-    failure = None
-    if end and end.get("reason") not in (None, "goal"):
-        failure = end["reason"]
-    elif collided:
+    failure = None  # a collision is named first: an episode that collided and then timed out failed by colliding
+    if collided:
         failure = "collision"
+    elif end and end.get("reason") not in (None, "goal"):
+        failure = end["reason"]
     statuses = [pl["status"] for pl in plans]
     return {
         "scenario": header["scenario"], "seed": header["seed"], "perception": header["perception"],

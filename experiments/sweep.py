@@ -41,6 +41,8 @@ def parse_seeds(text: str) -> list[int]:
                 lo, hi = int(a), int(b)
                 if hi <= lo:
                     raise SweepError(f"--seeds: empty range {part!r} (stop must be greater than start)")
+                if hi - lo > 1_000_000:
+                    raise SweepError(f"--seeds: range {part!r} is longer than 1000000 seeds")
                 out.update(range(lo, hi))
             elif part:
                 out.add(int(part))
@@ -51,6 +53,8 @@ def parse_seeds(text: str) -> list[int]:
     if not out or min(out) < 0:
         raise SweepError(f"--seeds: {text!r}: seeds must be non-negative integers")
     return sorted(out)
+
+
 
 
 def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -91,6 +95,15 @@ def read_results(path: Path) -> dict[int, dict]:
     return done
 
 
+def _end_with_newline(path: Path) -> None:
+    """A line cut short by a kill has no newline: end it, so the next result starts a line of its own."""
+    if path.exists() and path.stat().st_size > 0:
+        with open(path, "rb+") as fh:
+            fh.seek(-1, os.SEEK_END)
+            if fh.read(1) != b"\n":
+                fh.write(b"\n")
+
+
 def _append(path: Path, summary: dict) -> None:
     with open(path, "a", encoding="utf-8") as fh:
         fh.write(json.dumps(summary, separators=(",", ":")) + "\n")
@@ -129,10 +142,18 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / RESULTS
     done = read_results(res_path)
+    _end_with_newline(res_path)
     clash = [s for s in done.values() if s.get("perception") != perception]
     if clash:
         raise SweepError(f"{res_path}: holds results of perception {clash[0].get('perception')!r}, not "
                          f"{perception!r}; use another --out folder")
+    from sim import load_scenario
+
+    name = load_scenario(scenario).name
+    other = [s for s in done.values() if s.get("scenario") != name]
+    if other:
+        raise SweepError(f"{res_path}: holds results of scenario {other[0].get('scenario')!r}, not {name!r}; "
+                         f"use another --out folder")
     todo = [s for s in seeds if s not in done]
     episodes_dir = str(out / "episodes")
     bar = _Progress(len(seeds), len(seeds) - len(todo)) if progress and todo else None
@@ -154,7 +175,7 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
             _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, finished)
     if bar:
         bar.close()
-    agg = aggregate([done[s] for s in seeds], scenario, perception)
+    agg = aggregate([done[s] for s in seeds], name, perception)
     agg["wall_s_this_run"] = round(time.perf_counter() - t0, 1)
     (out / "summary.json").write_text(json.dumps(agg, indent=1))
     (out / "summary.md").write_text(markdown(agg))
@@ -165,12 +186,15 @@ def _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, finishe
     import multiprocessing as mp
 
     # spawn: every worker starts clean (PyBullet's EGL plugin and numba do not like forked parents).
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as ex:
+    ex = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"))
+    try:
         pending = {ex.submit(run_one, scenario, s, perception, episodes_dir, keep_logs) for s in todo}
         while pending:
             ready, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in ready:
                 finished(f.result())
+    finally:  # on an error or Ctrl-C, do not run the queued episodes only to throw them away
+        ex.shutdown(wait=True, cancel_futures=True)
 
 
 def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, finished) -> None:
@@ -178,9 +202,13 @@ def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, fini
         from dask.distributed import Client, as_completed
     except ImportError:
         raise SweepError("--dask needs the cluster extra: pip install -e '.[cluster]'") from None
-    with Client(address) as client:
-        futures = [client.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, pure=False,
-                                 key=f"episode-{perception}-{s}") for s in todo]
+    try:
+        client = Client(address, timeout="10s")
+    except (ValueError, OSError, TimeoutError) as e:
+        raise SweepError(f"--dask: cannot connect to {address!r}: {e}") from None
+    with client:
+        # pure=False: every task gets a unique key, so sweeps sharing a scheduler never share results
+        futures = [client.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, pure=False) for s in todo]
         for f in as_completed(futures):
             finished(f.result())
 

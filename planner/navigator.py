@@ -29,6 +29,9 @@ class NavigatorConfig:
     static_band: float = 0.8  # m; ... and within this height of the goal altitude
     block_times: tuple[float, ...] = (0.0, 0.5, 1.0)  # s; moving obstacles block the path search here
     look_ahead: float = 2.0  # m along the path for the heading
+    max_heading_offset: float = 0.8  # rad; without the FOV constraint the heading stays within this of the
+    # direction to the goal, so a detour does not turn the camera away from where people come from (ours: a
+    # sideways detour at 80 deg left a person approaching from ahead unseen until it hit the drone)
     heading_lead_steps: int = 5  # the heading follows the planned velocity this many MPC steps ahead
     heading_min_speed: float = 0.5  # m/s; slower plans face the path ahead instead
     mpc: MPCConfig = field(default_factory=MPCConfig)
@@ -150,12 +153,19 @@ class MPCPlanner:
         ahead, _ = f.at(np.array([f.project(inp.position[:2]) + self.cfg.look_ahead]))
         d = ahead[0] - inp.position[:2]
         yaw = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else None
-        # Face the planned motion (the MPC keeps the motion inside the camera's view, so the heading
-        # must lead it round); when hovering or slow, face the path ahead.
         traj = res.trajectory
-        k = min(self.cfg.heading_lead_steps, len(traj.velocities) - 1)
-        vp = traj.velocities[k][:2]
-        if np.hypot(*vp) > self.cfg.heading_min_speed:
-            yaw = math.atan2(vp[1], vp[0])
+        if self.cfg.mpc.fov_half_angle is not None:
+            # The MPC keeps the motion inside the camera's view: the heading must lead it round, so it
+            # faces the planned motion (the path ahead when slow).
+            k = min(self.cfg.heading_lead_steps, len(traj.velocities) - 1)
+            vp = traj.velocities[k][:2]
+            if np.hypot(*vp) > self.cfg.heading_min_speed:
+                yaw = math.atan2(vp[1], vp[0])
+        else:
+            g = inp.goal[:2] - inp.position[:2]
+            if yaw is not None and np.hypot(*g) > 0.5:
+                to_goal = math.atan2(g[1], g[0])
+                off = (yaw - to_goal + math.pi) % (2 * math.pi) - math.pi
+                yaw = to_goal + float(np.clip(off, -self.cfg.max_heading_offset, self.cfg.max_heading_offset))
         return Trajectory(traj.t0, traj.dt, traj.positions, traj.velocities, traj.accelerations,
                           status=traj.status, solve_ms=traj.solve_ms, yaw=yaw)
