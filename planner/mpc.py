@@ -65,6 +65,10 @@ class MPCConfig:
     # with the heading turned along each dodge the drone lost sight of the person it dodged, and corridor
     # seeds 0-14 failed 12 times against 8 without it (Intent-MPC has optional FOV planes too)
     fov_steps: int = 10  # steps (1 s) under the FOV constraint; later ones may assume the heading has turned
+    max_backward_speed: float | None = None  # m/s against the heading over the same steps (when the FOV
+    # constraint is off): no fast blind reversing; None: off. Tried at 0.5 (with a 1.2 m/s cruise and a
+    # 0.4 m margin) after an oracle episode fled a person backwards at 1.7 m/s into another: corridor seeds
+    # 0-7 then failed 9 times in 14 episodes (dodt + oracle) against 4 without it, so it is off
     fov_free_speed: float = 0.3  # m/s allowed in any direction (backing off, small corrections)
     static_slack_scale: float = 10.0  # static slack costs this many times the dynamic one: squeezed between a
     # person and a wall, the plan eats into the person's margin (which holds its uncertainty), not the wall's;
@@ -340,6 +344,16 @@ class MPC:
         relax = np.maximum(excess - 0.5 * cfg.a_max_xy * cfg.dt * np.arange(1, K + 1), 0.0)
         return np.broadcast_to(rows, (K, 2, 2)), cfg.fov_free_speed + relax
 
+    def _backward_rows(self, heading, v0):
+        """(6'): -h . v_k <= max_backward_speed for the first fov_steps steps, relaxed like (6) from a start
+        already reversing faster."""
+        cfg = self.cfg
+        K = min(cfg.fov_steps, self.N)
+        h = np.array([math.cos(heading), math.sin(heading)])
+        excess = max(float(-h @ v0[:2]) - cfg.max_backward_speed, 0.0)
+        relax = np.maximum(excess - 0.5 * cfg.a_max_xy * cfg.dt * np.arange(1, K + 1), 0.0)
+        return np.broadcast_to(-h, (K, 2)), cfg.max_backward_speed + relax
+
     def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None,
               heading: float | None = None) -> MPCResult:
         """One receding-horizon plan from (position, velocity) at time t0; see the module docstring.
@@ -403,6 +417,10 @@ class MPC:
                 fr, fb = self._fov_rows(heading, v0)
                 Ax[self._fov_pos[:len(fb)]] = fr
                 u[self._rf:self._rf + 2 * len(fb)] = np.repeat(fb, 2)
+            elif heading is not None and cfg.max_backward_speed is not None and math.isfinite(heading):
+                fr, fb = self._backward_rows(heading, v0)
+                Ax[self._fov_pos[:len(fb), 0]] = fr
+                u[self._rf:self._rf + 2 * len(fb):2] = fb
             l[self._rd:self._rs].reshape(N, -1)[:, :J] = bd
             l[self._rs:self._rf] = bs.ravel()
             self.solver.update(q=q, l=l, u=u, Ax=Ax)
