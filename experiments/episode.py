@@ -40,6 +40,10 @@ class EpisodeConfig:
     map_every: int = 2  # camera frames per map update: 15 Hz at 30 Hz (reference map timer: 20 Hz)
     max_yaw_rate: float = 1.2  # rad/s, heading changes toward the planner's yaw
     map_snapshot_period: float = 1.0  # s between occupied-voxel snapshots in the log
+    # s: a moving obstacle perception stops reporting while it is out of the camera's view is still
+    # given to the planner this long, its prediction widening by memory_std_growth (0 = off)
+    memory: float = 0.0
+    memory_std_growth: float = 0.3  # m/s
     duration: float | None = None  # s; None: the scenario's duration
 
 
@@ -68,6 +72,41 @@ def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePredictio
         v = o.velocity + o.acceleration * min(lag, o.accel_horizon)
         out.append(replace(o, center=c, velocity=v, position_std=float(o.std_at(np.array([lag]))[0])))
     return tuple(out)
+
+
+class ObstacleMemory:
+    """Moving obstacles that left the camera's view: perception drops them (DODT after its coasting time,
+    the oracle after its memory), yet they are still there, usually beside the drone. Each id last
+    reported is kept for ``memory`` seconds while its predicted centre is outside the current view."""
+
+    def __init__(self, memory: float, std_growth: float):
+        self.memory, self.std_growth = memory, std_growth
+        self.last: dict[int, tuple[ObstaclePrediction, float]] = {}
+
+    def update(self, obstacles, stamp: float) -> None:
+        for o in obstacles:
+            self.last[o.id] = (o, stamp)
+
+    def extra(self, current_ids: set, now: float, T_world_camera, intrinsics) -> list[ObstaclePrediction]:
+        out = []
+        K = intrinsics
+        half_fov = math.atan2(max(K.cx, K.width - K.cx), K.fx)
+        cam, fwd = T_world_camera[:3, 3], T_world_camera[:3, 2]
+        heading = math.atan2(fwd[1], fwd[0])
+        for oid, (o, stamp) in list(self.last.items()):
+            if oid in current_ids:
+                continue
+            age = now - stamp
+            if age > self.memory:
+                del self.last[oid]
+                continue
+            c = o.predict(np.array([age]))[0]
+            d = c[:2] - cam[:2]
+            bearing = abs((math.atan2(d[1], d[0]) - heading + math.pi) % (2 * math.pi) - math.pi)
+            if bearing <= half_fov and np.hypot(*d) < 4.5:
+                continue  # in view and not reported: it is not there
+            out.append(replace(o, std_growth=max(o.std_growth, self.std_growth)))
+        return out
 
 
 def _finite_trajectory(traj) -> bool:
@@ -130,6 +169,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
              "people": [{"id": i, "height": round(w.height, 3)} for i, w in zip(world.person_ids, world.walkers)]})
 
     obstacles, obstacles_stamp = (), 0.0
+    memory = ObstacleMemory(cfg.memory, cfg.memory_std_growth) if cfg.memory > 0 else None
     traj: Trajectory | None = None
     yaw = float(sc.drone.yaw)
     accel_cmd = np.zeros(3)
@@ -147,6 +187,13 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
             perc_ms = (time.perf_counter() - t0) * 1e3
             if po.skipped is None:
                 obstacles, obstacles_stamp = po.obstacles, po.stamp
+                if memory is not None:
+                    memory.update(po.obstacles, po.stamp)
+                    ids = {o.id for o in po.obstacles}
+                    extra = memory.extra(ids, po.stamp, frame.T_world_camera, frame.intrinsics)
+                    # remembered obstacles carry their own stamps: extrapolate them to this frame's
+                    obstacles = tuple(obstacles) + tuple(
+                        _extrapolate((o,), memory.last[o.id][1], po.stamp)[0] for o in extra)
             map_ms = None
             if n_frames % cfg.map_every == 0:
                 depth_m, _ = frame.depth_m_counted()
