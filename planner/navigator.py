@@ -32,6 +32,7 @@ class NavigatorConfig:
     max_heading_offset: float = 0.8  # rad; without the FOV constraint the heading stays within this of the
     # direction to the goal, so a detour does not turn the camera away from where people come from (ours: a
     # sideways detour at 80 deg left a person approaching from ahead unseen until it hit the drone)
+    yield_fractions: tuple[float, ...] = (1.0, 0.66, 0.33, 0.0)  # of cruise: see MPCPlanner.reference
     heading_lead_steps: int = 5  # the heading follows the planned velocity this many MPC steps ahead
     heading_min_speed: float = 0.5  # m/s; slower plans face the path ahead instead
     mpc: MPCConfig = field(default_factory=MPCConfig)
@@ -121,17 +122,47 @@ class MPCPlanner:
         self._path_stamp = inp.stamp
         self._goal = np.array(inp.goal, dtype=float)
 
-    def reference(self, inp: PlannerInput) -> tuple[np.ndarray, np.ndarray]:
-        """MPC position and velocity references (N, 3) along the path."""
-        c, m = self.cfg, self.cfg.mpc
-        f = self.follower
-        s = f.project(inp.position[:2])
-        s_k = np.empty(m.horizon)
-        v_k = np.empty(m.horizon)
+    def _profile(self, s0: float, cruise: float) -> tuple[np.ndarray, np.ndarray]:
+        c, m, f = self.cfg, self.cfg.mpc, self.follower
+        s_k, v_k = np.empty(m.horizon), np.empty(m.horizon)
+        s = s0
         for k in range(m.horizon):
-            v = min(c.cruise_speed, math.sqrt(2.0 * c.goal_decel * max(f.length - s, 0.0)))
+            v = min(cruise, math.sqrt(2.0 * c.goal_decel * max(f.length - s, 0.0)))
             s = min(s + v * m.dt, f.length)
             s_k[k], v_k[k] = s, v
+        return s_k, v_k
+
+    def _conflicts(self, s_k: np.ndarray, inp: PlannerInput) -> bool:
+        """Does a reference at arc lengths s_k meet a moving obstacle's prediction (same times)?"""
+        m = self.cfg.mpc
+        if not inp.obstacles:
+            return False
+        pts, _ = self.follower.at(s_k)
+        t = m.dt * np.arange(1, m.horizon + 1)
+        for o in inp.obstacles:
+            r = 0.5 * float(np.hypot(o.size[0], o.size[1])) + m.robot_radius + m.dynamic_margin
+            oc = o.predict(t)[:, :2]
+            if np.any(np.hypot(*(pts - oc).T) < r + o.std_at(t)):
+                return True
+        return False
+
+    def reference(self, inp: PlannerInput) -> tuple[np.ndarray, np.ndarray]:
+        """MPC position and velocity references (N, 3) along the path.
+
+        Yielding: the reference runs along the path at the fastest of ``yield_fractions`` x cruise
+        speed whose positions over the horizon keep clear of every moving obstacle's prediction, so
+        the drone waits for a crossing person to pass instead of racing it (the MPC alone would dodge
+        ahead of the person, into where it walks); when none is clear it runs at cruise speed and the
+        MPC's obstacle constraints do the avoiding."""
+        c, m = self.cfg, self.cfg.mpc
+        f = self.follower
+        s0 = f.project(inp.position[:2])
+        s_k, v_k = self._profile(s0, c.cruise_speed)
+        for frac in c.yield_fractions:
+            cand = self._profile(s0, c.cruise_speed * frac)
+            if not self._conflicts(cand[0], inp):
+                s_k, v_k = cand
+                break
         pts, tang = f.at(s_k)
         p_ref = np.column_stack([pts, np.full(m.horizon, float(inp.goal[2]))])
         v_ref = np.column_stack([tang * v_k[:, None], np.zeros(m.horizon)])

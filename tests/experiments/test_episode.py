@@ -18,7 +18,7 @@ CROSSING = """
 behaviour = "crossing"
 speed = 0.8
 waypoints = [[5.0, 1.7], [5.0, -1.7]]
-start_delay = 1.5
+start_delay = 0.5
 """
 
 
