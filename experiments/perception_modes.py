@@ -164,4 +164,4 @@ def make_perception(mode: str, learned_detector=None) -> PerceptionModule:
         return StaticOnlyPerception()
     if mode in PRESETS:
         return DODTPerception(mode, learned_detector=learned_detector)
-    raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(MODES + tuple(PRESETS))}")
+    raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(dict.fromkeys(MODES + tuple(PRESETS)))}")
