@@ -84,15 +84,18 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _check_perception(mode: str) -> None:
+    from experiments.perception_modes import known_modes
+
+    if mode not in known_modes():
+        raise UserError(f"--perception: unknown mode {mode!r}; known: {', '.join(known_modes())}")
+
+
 def _cmd_run(args) -> int:
     from experiments.episode import EpisodeConfig, run_episode
-    from experiments.perception_modes import MODES
-    from dodt.presets import PRESETS
 
     sc = load_scenario(args.scenario)
-    if args.perception not in MODES and args.perception not in PRESETS:
-        known = ", ".join(dict.fromkeys(MODES + tuple(PRESETS)))
-        raise UserError(f"--perception: unknown mode {args.perception!r}; known: {known}")
+    _check_perception(args.perception)
     if args.duration is not None and args.duration <= 0:
         raise UserError("--duration: must be > 0")
     out = Path(args.out)
@@ -149,11 +152,10 @@ def _cmd_plot(args) -> int:
     from experiments.plots import plot_episode, plot_sweep
 
     src = Path(args.source)
+    out = Path(args.out or (src if src.is_dir() else src.parent))
+    plot = plot_sweep if (src / "results.jsonl").exists() or src.name == "results.jsonl" else plot_episode
     try:
-        if (src / "results.jsonl").exists() or src.name == "results.jsonl":
-            files = plot_sweep(src, Path(args.out or (src if src.is_dir() else src.parent)))
-        else:
-            files = plot_episode(src, Path(args.out or (src if src.is_dir() else src.parent)))
+        files = plot(src, out)
     except ValueError as e:
         raise UserError(str(e)) from None
     print("wrote " + ", ".join(str(f) for f in files))
@@ -161,14 +163,10 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from dodt.presets import PRESETS
     from experiments import sweep
-    from experiments.perception_modes import MODES
 
     load_scenario(args.scenario)  # validate before starting workers
-    if args.perception not in MODES and args.perception not in PRESETS:
-        known = ", ".join(dict.fromkeys(MODES + tuple(PRESETS)))
-        raise UserError(f"--perception: unknown mode {args.perception!r}; known: {known}")
+    _check_perception(args.perception)
     if args.jobs < 1:
         raise UserError("--jobs: must be >= 1")
     if args.max_collision_rate is not None and not 0.0 <= args.max_collision_rate <= 1.0:

@@ -21,7 +21,7 @@ import numpy as np
 
 from experiments.episode_log import EpisodeLog, r4
 from experiments.episode_metrics import summarize
-from experiments.perception_modes import PerceptionModule, make_perception
+from experiments.perception_modes import PerceptionModule, bearing_and_distance, horizontal_view, make_perception
 from planner.fallback import brake_and_hold
 from planner.mpc import MPCConfig
 from planner.navigator import MPCPlanner, NavigatorConfig
@@ -89,10 +89,7 @@ class ObstacleMemory:
 
     def extra(self, current_ids: set, now: float, T_world_camera, intrinsics) -> list[ObstaclePrediction]:
         out = []
-        K = intrinsics
-        half_fov = math.atan2(max(K.cx, K.width - K.cx), K.fx)
-        cam, fwd = T_world_camera[:3, 3], T_world_camera[:3, 2]
-        heading = math.atan2(fwd[1], fwd[0])
+        cam, heading, half_fov = horizontal_view(T_world_camera, intrinsics)
         for oid, (o, stamp) in list(self.last.items()):
             if oid in current_ids:
                 continue
@@ -100,10 +97,8 @@ class ObstacleMemory:
             if age > self.memory:
                 del self.last[oid]
                 continue
-            c = o.predict(np.array([age]))[0]
-            d = c[:2] - cam[:2]
-            bearing = abs((math.atan2(d[1], d[0]) - heading + math.pi) % (2 * math.pi) - math.pi)
-            if bearing <= half_fov and np.hypot(*d) < 4.5:
+            bearing, dist = bearing_and_distance(cam, heading, o.predict(np.array([age]))[0])
+            if bearing <= half_fov and dist < 4.5:
                 continue  # in view and not reported: it is not there
             out.append(replace(o, std_growth=max(o.std_growth, self.std_growth)))
         return out
@@ -260,7 +255,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
         truth = world.ground_truth() if frame is not None else truth
         k += 1
         cl = world.clearance_log[-1]
-        log.add({"k": "s", "t": round(world.time, 5), "p": r4(world.state().position), "v": r4(world.state().velocity),
+        after = world.state()
+        log.add({"k": "s", "t": round(world.time, 5), "p": r4(after.position), "v": r4(after.velocity),
                  "r": r4(p_ref), "c": [round(min(x, 9.0), 4) for x in cl[1:]]})
         for ev in world.collisions[n_collisions:]:
             log.add({"k": "collision", "t": round(ev.time, 5), "kind": ev.other_kind, "other_id": ev.other_id,

@@ -10,7 +10,8 @@ import math
 import numpy as np
 
 
-def _stats(values) -> dict:
+def timing_stats(values) -> dict:
+    """n, median, p95, p99, max of the finite values (rounded to 1e-3); {'n': 0} when there are none."""
     a = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if a.size == 0:
         return {"n": 0}
@@ -62,8 +63,8 @@ def summarize(records: list[dict]) -> dict:
                           "errors": sum(s.startswith("error") for s in statuses)},
         "perception_stats": {"frames": len(frames), "skipped": sum(1 for f in frames if f.get("skipped"))},
         "timing": {
-            "planner_solve_ms": _stats(pl.get("ms") for pl in plans),
-            "perception_ms": _stats(f.get("perc_ms") for f in frames),
-            "map_update_ms": _stats(f.get("map_ms") for f in frames),
+            "planner_solve_ms": timing_stats(pl.get("ms") for pl in plans),
+            "perception_ms": timing_stats(f.get("perc_ms") for f in frames),
+            "map_update_ms": timing_stats(f.get("map_ms") for f in frames),
         },
     }

@@ -30,6 +30,24 @@ from planner.types import ObstaclePrediction
 MODES = ("dodt", "oracle", "static-only")
 
 
+def known_modes() -> tuple[str, ...]:
+    """Every name make_perception accepts: the modes and the DODT presets, once each."""
+    return tuple(dict.fromkeys(MODES + tuple(PRESETS)))
+
+
+def horizontal_view(T_world_camera: np.ndarray, K) -> tuple[np.ndarray, float, float]:
+    """(camera position (3,), heading [rad], half horizontal field of view [rad]) of a forward camera."""
+    fwd = T_world_camera[:3, 2]
+    return T_world_camera[:3, 3], math.atan2(fwd[1], fwd[0]), math.atan2(max(K.cx, K.width - K.cx), K.fx)
+
+
+def bearing_and_distance(cam: np.ndarray, heading: float, xy) -> tuple[float, float]:
+    """|angle| between the heading and the direction from the camera to a world point (x, y), and the
+    horizontal distance to it."""
+    d = np.asarray(xy, dtype=float)[:2] - cam[:2]
+    return abs((math.atan2(d[1], d[0]) - heading + math.pi) % (2 * math.pi) - math.pi), float(np.hypot(*d))
+
+
 @dataclass(frozen=True, eq=False)
 class PerceptionOutput:
     stamp: float
@@ -116,19 +134,13 @@ class OraclePerception:
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
         if truth is None:
             raise ValueError("the oracle perception mode needs the simulator's ground truth")
-        K = frame.intrinsics
-        half_fov = math.atan2(max(K.cx, K.width - K.cx), K.fx)
-        T = truth.T_world_camera
-        cam, fwd = T[:3, 3], T[:3, 2]
-        heading = math.atan2(fwd[1], fwd[0])
+        cam, heading, half_fov = horizontal_view(truth.T_world_camera, frame.intrinsics)
         preds, boxes, tracks = [], [], []
         for o in truth.obstacles:
             if o.kind != "person":
                 continue
-            d = o.center[:2] - cam[:2]
-            dist = float(np.hypot(*d))
             # Seen when any part of the body is within the horizontal FOV cone and range.
-            bearing = abs((math.atan2(d[1], d[0]) - heading + math.pi) % (2 * math.pi) - math.pi)
+            bearing, dist = bearing_and_distance(cam, heading, o.center)
             widen = math.atan2(0.5 * float(np.hypot(*o.size[:2])), max(dist, 1e-6))
             if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.max_range and bearing <= half_fov + widen:
                 self._last_seen[o.id] = truth.stamp
@@ -164,4 +176,4 @@ def make_perception(mode: str, learned_detector=None) -> PerceptionModule:
         return StaticOnlyPerception()
     if mode in PRESETS:
         return DODTPerception(mode, learned_detector=learned_detector)
-    raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(dict.fromkeys(MODES + tuple(PRESETS)))}")
+    raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(known_modes())}")

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.episode_metrics import timing_stats
+
 DPI = 110  # as experiments.bench_perception
 # One colour per person; pure red is kept for collisions, black for the drone.
 PERSON_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive",
@@ -118,13 +120,6 @@ def _people_paths(frames: list[dict]) -> dict:
             out.setdefault(p["id"], []).append((f["t"], c, np.asarray(p.get("v", (np.nan, np.nan))[:2], float)))
     return {pid: (np.array([a[0] for a in v]), np.array([a[1] for a in v]), np.array([a[2] for a in v]))
             for pid, v in out.items()}
-
-
-def _stats(values) -> tuple[int, float, float]:
-    a = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
-    if a.size == 0:
-        return 0, float("nan"), float("nan")
-    return int(a.size), float(np.median(a)), float(np.percentile(a, 95))
 
 
 # --------------------------------------------------------------------------- episode
@@ -340,8 +335,8 @@ def episode_runtime_rows(records: list[dict]) -> list[tuple[str, float, float, i
     for label, values in ((f"perception ({mode}) per frame", (r.get("perc_ms") for r in records if r["k"] == "f")),
                           ("map update", (r.get("map_ms") for r in records if r["k"] == "f")),
                           ("planner solve", (r.get("ms") for r in records if r["k"] == "plan"))):
-        n, med, p95 = _stats(values)
-        rows.append((label, med, p95, n))
+        st = timing_stats(values)
+        rows.append((label, st.get("median", float("nan")), st.get("p95", float("nan")), st["n"]))
     return rows
 
 

@@ -328,6 +328,14 @@ class MPC:
             dead |= (n @ PT) <= nq[:, None] + 1e-9  # points behind the plane through q: covered
         return n_out, b_out
 
+    def _relaxed_bound(self, now: float, bound: float, K: int) -> np.ndarray:
+        """Upper bounds (K,) for steps 1..K of a velocity row whose value at the start is ``now``: ``bound``,
+        plus the start's excess over it shrinking at half the acceleration limit per step (a start beyond
+        the bound is let back in gradually instead of making the QP infeasible)."""
+        cfg = self.cfg
+        excess = max(now - bound, 0.0)
+        return bound + np.maximum(excess - 0.5 * cfg.a_max_xy * cfg.dt * np.arange(1, K + 1), 0.0)
+
     def _fov_rows(self, heading, v0):
         """(6): rows (K, 2, 2) and upper bounds (K,) keeping the horizontal velocity of steps 1..K inside
         the cone of half-angle fov_half_angle around the heading, up to fov_free_speed in any direction:
@@ -340,9 +348,7 @@ class MPC:
         n = np.array([-h[1], h[0]])
         tt = math.tan(cfg.fov_half_angle)
         rows = np.array([n - tt * h, -n - tt * h])
-        excess = max(float(np.max(rows @ v0[:2])) - cfg.fov_free_speed, 0.0)
-        relax = np.maximum(excess - 0.5 * cfg.a_max_xy * cfg.dt * np.arange(1, K + 1), 0.0)
-        return np.broadcast_to(rows, (K, 2, 2)), cfg.fov_free_speed + relax
+        return np.broadcast_to(rows, (K, 2, 2)), self._relaxed_bound(float(np.max(rows @ v0[:2])), cfg.fov_free_speed, K)
 
     def _backward_rows(self, heading, v0):
         """(6'): -h . v_k <= max_backward_speed for the first fov_steps steps, relaxed like (6) from a start
@@ -350,9 +356,7 @@ class MPC:
         cfg = self.cfg
         K = min(cfg.fov_steps, self.N)
         h = np.array([math.cos(heading), math.sin(heading)])
-        excess = max(float(-h @ v0[:2]) - cfg.max_backward_speed, 0.0)
-        relax = np.maximum(excess - 0.5 * cfg.a_max_xy * cfg.dt * np.arange(1, K + 1), 0.0)
-        return np.broadcast_to(-h, (K, 2)), cfg.max_backward_speed + relax
+        return np.broadcast_to(-h, (K, 2)), self._relaxed_bound(float(-h @ v0[:2]), cfg.max_backward_speed, K)
 
     def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None,
               heading: float | None = None) -> MPCResult:

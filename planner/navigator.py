@@ -160,12 +160,13 @@ class MPCPlanner:
         c, m = self.cfg, self.cfg.mpc
         f = self.follower
         s0 = f.project(inp.position[:2])
-        s_k, v_k = self._profile(s0, c.cruise_speed)
-        for frac in c.yield_fractions:
-            cand = self._profile(s0, c.cruise_speed * frac)
-            if not self._conflicts(cand[0], inp):
-                s_k, v_k = cand
-                break
+        cruise = s_k, v_k = self._profile(s0, c.cruise_speed)
+        if tuple(c.yield_fractions) != (1.0,):  # yielding on (the default (1.0,) always gives cruise)
+            for frac in c.yield_fractions:
+                cand = cruise if frac == 1.0 else self._profile(s0, c.cruise_speed * frac)
+                if not self._conflicts(cand[0], inp):
+                    s_k, v_k = cand
+                    break
         pts, tang = f.at(s_k)
         p_ref = np.column_stack([pts, np.full(m.horizon, float(inp.goal[2]))])
         v_ref = np.column_stack([tang * v_k[:, None], np.zeros(m.horizon)])
