@@ -4,7 +4,6 @@ import base64
 import gzip
 import re
 import shutil
-import subprocess
 
 import numpy as np
 import pytest
@@ -16,6 +15,8 @@ from experiments.episode import EpisodeConfig, run_episode
 from experiments.viz import DRONE_RGB, FLOOR_RGB, LiveViewer, build_replay_html, start_meshcat_server, \
     stop_meshcat_server
 from sim import load_scenario
+
+from headless_chromium import screenshot
 
 VIEWER_JS_BYTES = 900_000  # meshcat's main.min.js, inlined in every page
 
@@ -70,11 +71,8 @@ def test_replay_is_one_offline_page_with_the_animated_scene(replay):
 
 def _screenshot(chromium: str, page, png, profile) -> np.ndarray:
     """What headless Chromium (software WebGL) shows of ``page`` (a file path or a URL) at 800x600."""
-    cmd = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
-           "--hide-scrollbars", "--virtual-time-budget=4000", "--window-size=800,600", f"--user-data-dir={profile}",
-           f"--screenshot={png}", page if isinstance(page, str) else page.resolve().as_uri()]
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
-    assert png.is_file(), f"chromium wrote no screenshot (status {r.returncode}): {r.stderr[-2000:]}"
+    url = page if isinstance(page, str) else page.resolve().as_uri()
+    screenshot(chromium, url, png, profile, width=800, height=600, frames=60)
     return np.asarray(Image.open(png).convert("RGB")).astype(int)
 
 
