@@ -149,6 +149,27 @@ class IdentificationConfig:
 
 
 @dataclass(frozen=True)
+class LearnedConfig:
+    """The optional learned person detector, YOLO-MAD (paper Sec. III-B; ref sections 4-5)."""
+
+    enabled: bool = False
+    model: str = ""  # ONNX file with its .json beside it; "" -> the model shipped in dodt/models
+    score_threshold: float | None = None  # None -> the value recorded with the model
+    nms_iou: float = 0.45  # ref
+    threads: int = 1  # onnxruntime intra-op threads
+    mad_n: float = 1.5  # depths within median +- n MAD belong to the object, ref (the paper leaves n open)
+    margin_px: int = 2  # px cut from each side of the 2D box before reading depths (ours)
+    min_depth_pixels: int = 20  # fewer valid depths in the box: no 3D box (ours)
+    depth_min: float = 0.2  # m, valid depths for lifting
+    depth_max: float = 10.0  # m: beyond the ensemble's 5 m, the module's range extension
+    min_thickness: float = 0.3  # m: the 3D box is at least this deep (ours)
+    center_behind_median: float = 0.1  # m: box centre behind the median depth of the visible surface (ours)
+    person_size: tuple[float, float, float] = (0.5, 0.5, 1.8)  # m, ref humanSize for the size sanity rule
+    overwrite_distance: float = 3.0  # m, ref yolo_overwrite_distance: closer unmatched boxes are dropped
+    iou_threshold: float = 0.05  # mutual best match with a fused box, ref
+
+
+@dataclass(frozen=True)
 class DODTConfig:
     name: str = "dodt"
     depth: DepthConfig = field(default_factory=DepthConfig)
@@ -160,3 +181,4 @@ class DODTConfig:
     kalman: KalmanConfig = field(default_factory=KalmanConfig)
     track: TrackConfig = field(default_factory=TrackConfig)
     identification: IdentificationConfig = field(default_factory=IdentificationConfig)
+    learned: LearnedConfig = field(default_factory=LearnedConfig)

@@ -9,9 +9,9 @@ is checked: a wrong shape or dtype, or intrinsics that do not match the image, r
 ValueError naming the problem; bad data is skipped and counted instead (NaN / inf / negative
 depth pixels are invalid pixels; a frame with a non-finite pose or a timestamp that does not
 move forward is skipped; a gap longer than the coasting time restarts the tracks).
-A learned detector plugs in through ``learned_detector``: a callable (frame, depth_m,
-ensemble_detections) -> detections that fuses its own boxes with the ensemble's (the YOLO-MAD
-issue defines the rules).
+The learned person detector (YOLO-MAD, dodt.learned) runs when ``cfg.learned.enabled``; any
+callable (frame, depth_m, ensemble_detections) -> detections can stand in for it through
+``learned_detector``. Its time is the "learned" module's.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ from dodt.result import PerceptionResult
 from dodt.tracker import Tracker
 from dodt.udepth import UDepthDetector
 
-MODULES = ("point_cloud", "udepth", "dbscan", "ensemble", "association", "kalman", "identification")
+MODULES = ("point_cloud", "udepth", "dbscan", "ensemble", "learned", "association", "kalman", "identification")
 
 
 def validate_frame(frame: SensorFrame) -> None:
@@ -74,6 +74,9 @@ class DODT:
         self.cloud = VoxelCloud(self.cfg.depth, self.cfg.voxel)
         self.udepth = UDepthDetector(self.cfg.udepth, self.cfg.depth)
         self.dbscan = DBSCANDetector(self.cfg.dbscan)
+        if learned_detector is None and self.cfg.learned.enabled:
+            from dodt.learned.fusion import YoloMAD  # loads onnxruntime and the model only when asked
+            learned_detector = YoloMAD(self.cfg.learned)
         self.learned_detector = learned_detector
         self.tracker = Tracker(self.cfg)
         self.last_stamp: float | None = None
@@ -124,15 +127,19 @@ class DODT:
             dets = ensemble(ud, db, cfg)
         else:
             dets = ud if cfg.detectors == ("udepth",) else db
+        t3 = time.perf_counter()
         if self.learned_detector is not None:
             dets = self.learned_detector(frame, depth_m, dets)
+        t4 = time.perf_counter()
         # Every detection carries the filtered points inside its box: its features and votes.
         for d in dets:
             if len(d.points) == 0 and len(points):
                 d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
-        t3 = time.perf_counter()
-        timings.update(udepth=(t1 - t0) * 1e3, dbscan=(t2 - t1) * 1e3, ensemble=(t3 - t2) * 1e3)
-        return dets, {"udepth": ud, "dbscan": db, "ensemble": dets, "timings": timings}
+        t5 = time.perf_counter()
+        timings.update(udepth=(t1 - t0) * 1e3, dbscan=(t2 - t1) * 1e3, ensemble=(t3 - t2 + t5 - t4) * 1e3,
+                       learned=(t4 - t3) * 1e3)
+        learned = list(getattr(self.learned_detector, "last_3d", []))
+        return dets, {"udepth": ud, "dbscan": db, "learned": learned, "ensemble": dets, "timings": timings}
 
     # ------------------------------------------------------------------ main entry
 
@@ -186,6 +193,6 @@ class DODT:
         timings = {"point_cloud": t_cloud, **debug["timings"], "association": (t1 - t0) * 1e3,
                    "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3,
                    "total": (t3 - t_start) * 1e3}
-        boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]] for k in ("udepth", "dbscan", "ensemble")}
+        boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]] for k in ("udepth", "dbscan", "learned", "ensemble")}
         return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),
                                 timings_ms=timings, detections=boxes, bad_pixels=n_bad)

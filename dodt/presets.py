@@ -7,6 +7,8 @@ published numbers.
 
 - dodt: the full method (ensemble of U-depth and DBSCAN, feature association, constant
   acceleration filter, point voting, coasting through occlusions).
+- dodt+yolo: dodt with the optional learned person detector (YOLO-MAD, dodt.learned) on the
+  color image: needs the shipped ONNX model and onnxruntime.
 - dodt-no-ensemble: the U-depth detector alone ("w/o Ens" in the paper's Table I).
 - dodt-no-fat: centre-distance association and a constant-velocity filter ("w/o FAT").
 - dodt-no-coast: the paper's own behaviour of dropping a track as soon as it is missed.
@@ -22,7 +24,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from dodt.config import (AssociationConfig, DODTConfig, EnsembleConfig, IdentificationConfig, KalmanConfig,
-                         TrackConfig)
+                         LearnedConfig, TrackConfig)
 
 _CENTER_CV = dict(association=AssociationConfig(method="center"), kalman=KalmanConfig(model="cv"))
 _VELOCITY_ONLY = IdentificationConfig(method="velocity", consistency=1, force_dynamic_window=1000)
@@ -30,6 +32,7 @@ _NO_COAST = TrackConfig(coast_time=0.0)
 
 PRESETS: dict[str, DODTConfig] = {
     "dodt": DODTConfig(name="dodt"),
+    "dodt+yolo": DODTConfig(name="dodt+yolo", learned=LearnedConfig(enabled=True)),
     "dodt-no-ensemble": DODTConfig(name="dodt-no-ensemble", ensemble=EnsembleConfig(detectors=("udepth",))),
     "dodt-no-fat": DODTConfig(name="dodt-no-fat", **_CENTER_CV),
     "dodt-no-coast": DODTConfig(name="dodt-no-coast", track=_NO_COAST),

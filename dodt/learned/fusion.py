@@ -1,0 +1,82 @@
+"""Learned person boxes joined to the ensemble's boxes, by the reference code's rules (ref section 4,
+step 2), and the module the pipeline calls.
+
+- A learned box that is the mutual best match of a fused box (both IoUs above the threshold)
+  replaces it by the union of the two, marked a person (dynamic at once in identification).
+- A learned box that overlaps no fused box is added when it is at least ``overwrite_distance``
+  from the camera: there the depth is too sparse for the geometric detectors, which is what the
+  module is for; closer, the geometric detectors should have seen it, and it is taken for a
+  learned detector's mistake.
+- A learned box that overlaps fused boxes without being a mutual best match is dropped.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from dodt.config import LearnedConfig
+from dodt.detection import Detection
+from dodt.ensemble import mutual_best_pairs
+from dodt.geometry import iou_matrix
+from dodt.learned.lifting import lift_box
+
+
+def fuse_learned(fused: list[Detection], learned: list[Detection], camera: np.ndarray,
+                 cfg: LearnedConfig) -> list[Detection]:
+    """The ensemble's boxes with the learned boxes joined in (a new list; inputs are not changed)."""
+    out = list(fused)
+    if not learned:
+        return out
+    if fused:
+        iou = iou_matrix([d.center for d in learned], [d.size for d in learned],
+                         [d.center for d in fused], [d.size for d in fused])
+    else:
+        iou = np.zeros((len(learned), 0))
+    for i, j in mutual_best_pairs(iou, cfg.iou_threshold):
+        a, b = learned[i], fused[j]
+        lo, hi = np.minimum(a.lower, b.lower), np.maximum(a.upper, b.upper)
+        merged = Detection.from_bounds(lo, hi, source="ensemble+learned")
+        merged.is_person = True
+        out[j] = merged  # no points: the pipeline gives it the filtered points inside it
+    for i, d in enumerate(learned):
+        overlaps = iou.shape[1] > 0 and bool(np.any(iou[i] > 0))
+        if not overlaps and np.linalg.norm(d.center - camera) >= cfg.overwrite_distance:
+            out.append(d)
+    return out
+
+
+class YoloMAD:
+    """The pipeline's learned module: (frame, depth_m, ensemble boxes) -> boxes with people joined in.
+
+    Keeps the last frame's 2D boxes, 3D boxes and timings for benchmarks and viewers.
+    """
+
+    def __init__(self, cfg: LearnedConfig, detector=None):
+        from dodt.learned.model import PersonDetector2D
+
+        self.cfg = cfg
+        self.detector = detector or PersonDetector2D(cfg.model or None, cfg.score_threshold, cfg.nms_iou, cfg.threads)
+        self.last_boxes_2d = np.zeros((0, 4), np.float32)
+        self.last_scores = np.zeros(0, np.float32)
+        self.last_3d: list[Detection] = []
+        self.last_timings_ms = {"inference": 0.0, "lifting": 0.0}
+        self.frames_without_color = 0
+
+    def __call__(self, frame, depth_m: np.ndarray, fused: list[Detection]) -> list[Detection]:
+        if frame.color is None:  # a depth-only frame: the module has nothing to look at
+            self.frames_without_color += 1
+            self.last_boxes_2d, self.last_scores, self.last_3d = np.zeros((0, 4), np.float32), np.zeros(0), []
+            self.last_timings_ms = {"inference": 0.0, "lifting": 0.0}
+            return list(fused)
+        t0 = time.perf_counter()
+        boxes, scores = self.detector(frame.color)
+        t1 = time.perf_counter()
+        T = np.asarray(frame.T_world_camera, dtype=np.float64)
+        lifted = [lift_box(depth_m, b, frame.intrinsics, T, self.cfg) for b in boxes]
+        learned = [d for d in lifted if d is not None]
+        out = fuse_learned(fused, learned, T[:3, 3], self.cfg)
+        t2 = time.perf_counter()
+        self.last_boxes_2d, self.last_scores, self.last_3d = boxes, scores, learned
+        self.last_timings_ms = {"inference": (t1 - t0) * 1e3, "lifting": (t2 - t1) * 1e3}
+        return out

@@ -1,0 +1,69 @@
+"""The contract between training (experiments.detector, PyTorch) and run time (onnxruntime).
+
+Input: the color image (RGB uint8, any size) resized to INPUT_W x INPUT_H with bilinear
+interpolation (each axis scaled on its own), scaled to [0, 1], NCHW float32, ONNX input "images".
+Output "preds": (1, 5, GRID_H, GRID_W) raw values per cell of a stride-16 grid (one anchor-free
+head, one class): channel 0 the objectness logit, channels 1-4 (tx, ty, tw, th) decoded as in
+FastestDet: cx = (gx + tanh(tx)) / GRID_W, cy = (gy + tanh(ty)) / GRID_H, w = sigmoid(tw),
+h = sigmoid(th), all as fractions of the image's width and height.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+INPUT_W, INPUT_H = 352, 256
+STRIDE = 16
+GRID_W, GRID_H = INPUT_W // STRIDE, INPUT_H // STRIDE
+CHANNELS = 5  # objectness, tx, ty, tw, th
+
+
+def resize_for_network(color: np.ndarray) -> np.ndarray:
+    """(INPUT_H, INPUT_W, 3) uint8: what the dataset stores and the network sees."""
+    if color.shape[:2] == (INPUT_H, INPUT_W):
+        return color
+    return cv2.resize(color, (INPUT_W, INPUT_H), interpolation=cv2.INTER_LINEAR)
+
+
+def to_tensor(images: np.ndarray) -> np.ndarray:
+    """(N, H, W, 3) or (H, W, 3) uint8 at the network size -> (N, 3, H, W) float32 in [0, 1]."""
+    x = np.asarray(images)
+    if x.ndim == 3:
+        x = x[None]
+    return np.ascontiguousarray(x.transpose(0, 3, 1, 2), dtype=np.float32) * np.float32(1.0 / 255.0)
+
+
+def decode(preds: np.ndarray, score_threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (K, 4) as (x1, y1, x2, y2) fractions of the image, and scores (K,), from one image's
+    raw (5, GRID_H, GRID_W) output, before non-maximum suppression."""
+    p = np.asarray(preds, dtype=np.float32).reshape(CHANNELS, GRID_H, GRID_W)
+    score = 1.0 / (1.0 + np.exp(-p[0]))
+    gy, gx = np.nonzero(score >= score_threshold)
+    if len(gx) == 0:
+        return np.zeros((0, 4), np.float32), np.zeros(0, np.float32)
+    t = p[1:, gy, gx]
+    cx = (gx + np.tanh(t[0])) / GRID_W
+    cy = (gy + np.tanh(t[1])) / GRID_H
+    w = 1.0 / (1.0 + np.exp(-t[2]))
+    h = 1.0 / (1.0 + np.exp(-t[3]))
+    boxes = np.stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], axis=1).clip(0.0, 1.0)
+    return boxes.astype(np.float32), score[gy, gx].astype(np.float32)
+
+
+def nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> np.ndarray:
+    """Indices kept by greedy non-maximum suppression, best score first."""
+    order = np.argsort(-scores, kind="stable")
+    keep = []
+    area = (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+    while len(order):
+        i = order[0]
+        keep.append(int(i))
+        rest = order[1:]
+        x1 = np.maximum(boxes[i, 0], boxes[rest, 0])
+        y1 = np.maximum(boxes[i, 1], boxes[rest, 1])
+        x2 = np.minimum(boxes[i, 2], boxes[rest, 2])
+        y2 = np.minimum(boxes[i, 3], boxes[rest, 3])
+        inter = np.clip(x2 - x1, 0, None) * np.clip(y2 - y1, 0, None)
+        iou = inter / np.maximum(area[i] + area[rest] - inter, 1e-12)
+        order = rest[iou <= iou_threshold]
+    return np.asarray(keep, dtype=np.int64)

@@ -1,0 +1,124 @@
+"""YOLO-MAD without the network: MAD lifting of a 2D box on synthetic depth, and the fusion rules."""
+import numpy as np
+import pytest
+
+from dodt.config import LearnedConfig
+from dodt.detection import Detection
+from dodt.frames import CameraIntrinsics
+from dodt.learned.fusion import fuse_learned
+from dodt.learned.lifting import lift_box, mad_depth_range, size_sanity
+
+K = CameraIntrinsics()
+CFG = LearnedConfig()
+# Optical frame -> world (x forward, y left, z up), camera at 1.2 m height.
+T = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 1.2], [0.0, 0.0, 0.0, 1.0]])
+
+
+def _scene(person_x: float, person_y: float, radius: float = 0.17, height: float = 1.75, seed: int = 0):
+    """Depth of a room (floor, back wall at 9 m, a pillar at the person's side) with a person: a
+    vertical cylinder of ``radius`` centred at world (person_x, person_y), and its 2D box grown as a
+    detector's loose box (15 % of the width on each side, 5 % of the height) to take in background."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:K.height, 0:K.width].astype(np.float64)
+    rx, ry = (u - K.cx) / K.fx, (v - K.cy) / K.fy  # optical ray (rx, ry, 1)
+    # world ray direction: forward 1, left -rx, up -ry
+    depth = np.full(u.shape, 9.0)  # back wall
+    floor = np.where(ry > 1e-6, 1.2 / np.maximum(ry, 1e-6), np.inf)
+    depth = np.minimum(depth, floor)
+    # a pillar 0.6 m to the person's right and 1.5 m behind: clutter inside the box margin
+    for cx, cy, r, h, in ((person_x + 1.5, person_y - 0.6, 0.3, 3.0), (person_x, person_y, radius, height)):
+        # ray p = t (1, -rx, -ry) + (0, 0, 1.2) in world; solve |(t - cx, -t rx - cy)| = r
+        a = 1 + rx ** 2
+        b = -2 * cx + 2 * rx * cy
+        c = cx ** 2 + cy ** 2 - r ** 2
+        disc = b ** 2 - 4 * a * c
+        t = np.where(disc >= 0, (-b - np.sqrt(np.maximum(disc, 0))) / (2 * a), np.inf)
+        z = 1.2 - t * ry
+        hit = (disc >= 0) & (t > 0) & (z >= 0) & (z <= h)
+        depth = np.where(hit, np.minimum(depth, t), depth)
+    depth = depth + rng.normal(0, 0.002 * depth ** 2)  # stereo-like noise growing with depth squared
+    depth[rng.random(depth.shape) < 0.03] = 0.0  # dropouts
+    # 2D box of the person, loose
+    pts = np.array([[person_x - radius, person_y + s * radius, z] for s in (-1, 1) for z in (0.0, height)])
+    cam = (pts - T[:3, 3]) @ T[:3, :3]
+    uu = K.fx * cam[:, 0] / cam[:, 2] + K.cx
+    vv = K.fy * cam[:, 1] / cam[:, 2] + K.cy
+    mw, mh = 0.15 * (uu.max() - uu.min()), 0.05 * (vv.max() - vv.min())
+    box = (uu.min() - mw, vv.min() - mh, uu.max() + mw, vv.max() + mh)
+    return depth.astype(np.float32), box
+
+
+@pytest.mark.parametrize("x,y", [(2.0, 0.0), (4.0, 0.5), (6.5, -0.8), (8.0, 0.3)])
+def test_mad_lifting_finds_the_person_among_clutter(x, y):
+    depth, box = _scene(x, y)
+    det = lift_box(depth, box, K, T, CFG)
+    assert det is not None and det.is_person and det.source == "learned"
+    # the person's centre along the view (world x) within 10 cm, sideways within 10 cm
+    assert abs(det.center[0] - x) < 0.10, det.center
+    assert abs(det.center[1] - y) < 0.10, det.center
+    assert 0.2 < det.size[0] < 1.0 and 0.2 < det.size[1] < 1.0
+    assert det.lower[2] < 0.15 and 1.5 < det.upper[2] < 2.0
+
+
+def test_without_mad_the_background_drags_the_box_away():
+    """The same box's plain depth range spans wall and floor: MAD is what isolates the person."""
+    depth, box = _scene(6.5, -0.8)
+    x1, y1, x2, y2 = (int(round(b)) for b in box)
+    d = depth[y1:y2, x1:x2]
+    d = d[(d > 0.2) & (d < 10)]
+    med, lo, hi = mad_depth_range(d, 1.5)
+    assert hi - lo < 0.6 and d.max() - d.min() > 2.0
+    assert abs(med - 6.5) < 0.3 and abs(np.mean(d) - 6.5) > 0.3  # the mean is dragged, the median is not
+
+
+def test_mad_range_rules():
+    assert mad_depth_range(np.array([]), 1.5) is None
+    med, lo, hi = mad_depth_range(np.array([4.0, 4.1, 4.05, 3.95, 9.0, 1.0, 4.02]), 1.5)
+    assert med == pytest.approx(4.02) and lo == pytest.approx(3.95) and hi == pytest.approx(4.1)
+
+
+def test_too_few_depths_give_no_box():
+    depth = np.zeros((K.height, K.width), np.float32)
+    depth[100:103, 100:103] = 4.0  # 9 valid pixels < min_depth_pixels
+    assert lift_box(depth, (90, 90, 120, 120), K, T, CFG) is None
+
+
+def test_size_sanity_replaces_implausible_dimensions():
+    lo, hi = size_sanity(np.array([0.0, 0.0, 0.5]), np.array([3.0, 0.4, 0.9]), CFG)  # 3 m long, 0.4 m tall
+    size, center = hi - lo, (lo + hi) / 2
+    assert size == pytest.approx([0.5, 0.4, 1.8])
+    assert center[0] == pytest.approx(1.5) and center[2] == pytest.approx(0.9)  # height stands on the floor
+
+
+def _box(c, s=(0.5, 0.5, 1.7), person=False, source="ensemble"):
+    d = Detection(center=np.array(c, float), size=np.array(s, float), source=source)
+    d.is_person = person
+    return d
+
+
+def test_fusion_mutual_best_match_becomes_a_union_person_box():
+    fused = [_box((3, 0, 0.85)), _box((3, 2, 0.85))]
+    learned = [_box((3.2, 0.1, 0.9), (0.5, 0.5, 1.8), True, "learned")]
+    out = fuse_learned(fused, learned, np.zeros(3), CFG)
+    assert len(out) == 2 and out[1] is fused[1]
+    m = out[0]
+    assert m.is_person and np.allclose(m.lower, np.minimum(fused[0].lower, learned[0].lower))
+    assert np.allclose(m.upper, np.maximum(fused[0].upper, learned[0].upper))
+    assert not fused[0].is_person  # the inputs are not changed
+
+
+def test_fusion_unmatched_far_box_is_added_near_one_dropped():
+    fused = [_box((2, 1.5, 0.85))]
+    far = _box((7, -1, 0.9), (0.5, 0.5, 1.8), True, "learned")
+    near = _box((2, -1, 0.9), (0.5, 0.5, 1.8), True, "learned")  # 2.2 m < overwrite_distance 3 m
+    out = fuse_learned(fused, [far, near], np.zeros(3), CFG)
+    assert out[0] is fused[0] and out[1:] == [far]
+    assert fuse_learned([], [far, near], np.zeros(3), CFG) == [far]
+
+
+def test_fusion_overlap_without_mutual_best_match_is_dropped():
+    fused = [_box((5, 0, 0.85))]
+    a = _box((5.05, 0, 0.9), (0.5, 0.5, 1.8), True, "learned")  # the fused box's best match
+    b = _box((5.4, 0.1, 0.9), (0.5, 0.5, 1.8), True, "learned")  # overlaps it, beaten by a
+    out = fuse_learned(fused, [a, b], np.zeros(3), CFG)
+    assert len(out) == 1 and out[0].is_person
