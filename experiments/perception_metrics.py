@@ -12,6 +12,9 @@ a pair counting only within ``match_distance`` (0.5 m).
 - recall: people walking (> 0.1 m/s) within 0.5-5 m of the camera and visible (at least
   ``min_visible_px`` pixels in the segmentation, or, without segmentation, centre in view)
   that are matched by a dynamic track, over all such people;
+- recall by distance: the same, counted in bins of camera distance out to 10 m (the paper's
+  Fig. 10: the learned module's range extension); people beyond 5 m count when they show at
+  least ``min_visible_px`` pixels (without segmentation: centre in view within 10 m);
 - id switches: a person matched by a different track id than the last time it was matched.
 """
 from __future__ import annotations
@@ -24,6 +27,12 @@ from scipy.optimize import linear_sum_assignment
 
 from dodt.frames import CameraIntrinsics
 from dodt.geometry import in_field_of_view
+
+RECALL_BINS = (0.5, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)  # m, camera distance
+
+
+def bin_labels() -> list[str]:
+    return [f"{a:g}-{b:g}" for a, b in zip(RECALL_BINS[:-1], RECALL_BINS[1:])]
 
 
 @dataclass
@@ -39,6 +48,8 @@ class PerceptionMetrics:
     visible_people: int = 0
     recalled_people: int = 0
     id_switches: int = 0
+    visible_by_bin: list = field(default_factory=lambda: [0] * (len(RECALL_BINS) - 1))
+    recalled_by_bin: list = field(default_factory=lambda: [0] * (len(RECALL_BINS) - 1))
     frames: int = 0
     last_id: dict = field(default_factory=dict)
     series: list = field(default_factory=list)  # (t, mean pos err of the frame, mean vel err) for plots
@@ -80,13 +91,18 @@ class PerceptionMetrics:
         cam = truth.T_world_camera
         for p in people:
             dist = float(np.linalg.norm(p.center - cam[:3, 3]))
-            if np.linalg.norm(p.velocity[:2]) <= 0.1 or not 0.5 <= dist <= 5.0:
+            if np.linalg.norm(p.velocity[:2]) <= 0.1 or not RECALL_BINS[0] <= dist <= RECALL_BINS[-1]:
                 continue
             if truth.segmentation is not None:
                 visible = int(np.count_nonzero(truth.segmentation == p.id)) >= self.min_visible_px
             else:
-                visible = bool(in_field_of_view(p.center[None], cam, K, 5.0)[0])
-            if visible:
+                visible = bool(in_field_of_view(p.center[None], cam, K, RECALL_BINS[-1])[0])
+            if not visible:
+                continue
+            b = min(int(np.searchsorted(RECALL_BINS, dist, side="right")) - 1, len(RECALL_BINS) - 2)
+            self.visible_by_bin[b] += 1
+            self.recalled_by_bin[b] += p.id in matched_people
+            if dist <= 5.0:
                 self.visible_people += 1
                 self.recalled_people += p.id in matched_people
         self.series.append((truth.stamp, float(np.mean(fe)) if fe else np.nan, float(np.mean(fv)) if fv else np.nan))
@@ -97,6 +113,11 @@ class PerceptionMetrics:
         return {"pos_err": mean(self.pos_err), "pos_err_3d": mean(self.pos_err_3d), "vel_err": mean(self.vel_err),
                 "fp_rate": self.false_dynamic / self.dynamic_reports if self.dynamic_reports else 0.0,
                 "recall": self.recalled_people / self.visible_people if self.visible_people else float("nan"),
+                "recall_by_distance": {lab: (r / v if v else float("nan")) for lab, v, r in
+                                       zip(bin_labels(), self.visible_by_bin, self.recalled_by_bin)},
+                "visible_by_distance": dict(zip(bin_labels(), self.visible_by_bin)),
+                "recall_beyond_4m": (sum(self.recalled_by_bin[3:]) / sum(self.visible_by_bin[3:])
+                                     if sum(self.visible_by_bin[3:]) else float("nan")),
                 "id_switches": self.id_switches, "matched": len(self.pos_err), "dynamic_reports": self.dynamic_reports,
                 "false_dynamic": self.false_dynamic, "duplicates": self.duplicates, "visible_people": self.visible_people, "frames": self.frames}
 
@@ -110,6 +131,8 @@ class PerceptionMetrics:
             for k in ("dynamic_reports", "false_dynamic", "duplicates", "visible_people", "recalled_people",
                       "id_switches", "frames"):
                 setattr(m, k, getattr(m, k) + getattr(p, k))
+            m.visible_by_bin = [a + b for a, b in zip(m.visible_by_bin, p.visible_by_bin)]
+            m.recalled_by_bin = [a + b for a, b in zip(m.recalled_by_bin, p.recalled_by_bin)]
         return m.summary()
 
 
