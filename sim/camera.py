@@ -107,14 +107,18 @@ class RenderOutput:
 
 
 def render(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarray, renderer: str,
-           segmentation: bool) -> RenderOutput:
+           segmentation: bool, light_direction=None) -> RenderOutput:
+    """light_direction: optional (3,) world vector for PyBullet's light (both renderers honour
+    it; EGL keeps the last one given for later frames of the client, so pass it every frame or
+    never). Colour, ambient, diffuse and specular light settings have no effect under EGL."""
     flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
     r = p.ER_BULLET_HARDWARE_OPENGL if renderer == "egl" else p.ER_TINY_RENDERER
+    light = {} if light_direction is None else {"lightDirection": [float(x) for x in light_direction]}
     with quiet_stdout():  # the EGL plugin prints on its first frame
         w, h, rgba, depth, seg = p.getCameraImage(
             K.width, K.height, view_matrix(T_world_camera),
             projection_matrix(K, sample_offset=PIXEL_SAMPLE_OFFSET[renderer]),
-            renderer=r, flags=flags, shadow=0, physicsClientId=client)
+            renderer=r, flags=flags, shadow=0, physicsClientId=client, **light)
     rgba = np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4)
     z = linearize_depth(np.asarray(depth, dtype=np.float32).reshape(h, w))
     s = np.asarray(seg, dtype=np.int32).reshape(h, w) if segmentation else None

@@ -37,6 +37,10 @@ class Corridor:
     width: float = 4.0  # m, along world y, centred on y = 0
     height: float = 3.0  # m, wall height
     ceiling: bool = False
+    # Optional RGB in [0, 1] (set from code, e.g. the detector's data generator; not read from
+    # TOML). None keeps the defaults: a grey floor, off-white walls jittered by the seed.
+    floor_color: tuple[float, float, float] | None = None
+    wall_color: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -70,9 +70,13 @@ class World:
     """Build from a scenario and a seed; ``step`` with references; read frames and truth."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, renderer: str | None = None,
-                 segmentation: bool | None = None, camera: bool = True):
+                 segmentation: bool | None = None, camera: bool = True,
+                 light_direction: tuple[float, float, float] | None = None):
         """camera=False skips rendering (frames and truth stay at their initial values); for
-        control and planning experiments that need no images."""
+        control and planning experiments that need no images. light_direction (world frame,
+        settable between frames as ``world.light_direction``) is passed to the renderer; None
+        keeps PyBullet's default light."""
+        self.light_direction = light_direction
         self.scenario = scenario
         self.camera_on = camera
         self.seed = scenario.seed if seed is None else int(seed)
@@ -259,8 +263,10 @@ class World:
     def _build_corridor(self, rng) -> None:
         co = self.scenario.corridor
         L, W, H, t = co.length, co.width, co.height, 0.1
-        floor = (0.55, 0.55, 0.55)
-        wall = tuple(np.clip(np.array([0.85, 0.82, 0.75]) + rng.uniform(-0.05, 0.05, 3), 0, 1))
+        floor = (0.55, 0.55, 0.55) if co.floor_color is None else tuple(co.floor_color)
+        wall = tuple(np.clip(np.array([0.85, 0.82, 0.75]) + rng.uniform(-0.05, 0.05, 3), 0, 1))  # always drawn
+        if co.wall_color is not None:
+            wall = tuple(co.wall_color)
         box = p.GEOM_BOX
         self._add_static([(box, [L / 2 + t, W / 2 + t, t / 2], [0, 0, 0])], STRUCTURE_ID, floor, [L / 2, 0, -t / 2])
         for side in (-1, 1):
@@ -551,7 +557,8 @@ class World:
         cam = self.scenario.camera
         T_true = self._camera_pose()
         t0 = time.perf_counter()  # benchmark bookkeeping only: no result depends on it
-        out = render(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on)
+        out = render(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
+                     light_direction=self.light_direction)
         self.render_wall_time += time.perf_counter() - t0
         z = self._noise_model.apply(out.depth, self._rng_noise)
         z[z < cam.min_range] = 0.0

@@ -1,0 +1,1 @@
+"""The learned person detector: training data rendered by the simulator (dataset.py)."""
