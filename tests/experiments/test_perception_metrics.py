@@ -1,0 +1,51 @@
+"""The perception metrics' counting rules on hand-made frames: recall by distance and the 5 m
+range of Table I's errors."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from dodt.frames import CameraIntrinsics
+from experiments.perception_metrics import RECALL_BINS, PerceptionMetrics, bin_labels
+from sim.ground_truth import ObstacleTruth
+
+K = CameraIntrinsics()
+T = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 1.2], [0.0, 0.0, 0.0, 1.0]])
+
+
+def _person(pid, x, y, vx=1.0):
+    return ObstacleTruth(pid, "person", "person", np.array([x - 0.2, y - 0.2, 0.0]), np.array([x + 0.2, y + 0.2, 1.8]),
+                         np.array([vx, 0.0, 0.0]))
+
+
+def _track(tid, x, y, vx):
+    return SimpleNamespace(id=tid, center=np.array([x, y, 0.9]), velocity=np.array([vx, 0.0, 0.0]), dynamic=True)
+
+
+def _frame(people, tracks):
+    truth = SimpleNamespace(obstacles=tuple(people), T_world_camera=T, segmentation=None, stamp=0.0)
+    return SimpleNamespace(dynamic=tuple(tracks)), truth
+
+
+def test_recall_by_distance_and_errors_within_table_range():
+    m = PerceptionMetrics()
+    people = [_person(1, 1.5, 0.0), _person(2, 3.5, 0.5), _person(3, 7.5, -0.5), _person(4, 9.0, 0.0),
+              _person(5, 12.0, 0.0), _person(6, 3.0, 0.0, vx=0.0)]  # beyond 10 m / standing: not counted
+    tracks = [_track(11, 1.6, 0.0, 0.9), _track(13, 7.8, -0.5, 0.5)]  # person 2 and 4 are missed
+    m.add(*_frame(people, tracks), K)
+    s = m.summary()
+    labels = bin_labels()
+    assert s["visible_by_distance"] == {lab: int(lab in ("0.5-2", "3-4", "7-8", "8-10")) for lab in labels}
+    assert s["recall_by_distance"]["0.5-2"] == 1.0 and s["recall_by_distance"]["7-8"] == 1.0
+    assert s["recall_by_distance"]["3-4"] == 0.0 and s["recall_by_distance"]["8-10"] == 0.0
+    assert np.isnan(s["recall_by_distance"]["4-5"])
+    assert s["recall_beyond_4m"] == pytest.approx(0.5)
+    assert s["recall"] == pytest.approx(0.5)  # Table I's recall: 0.5-5 m only
+    # Table I's errors: only the pair within 5 m; the 7.5 m pair is scored apart
+    assert s["pos_err"] == pytest.approx(0.1) and s["vel_err"] == pytest.approx(0.1)
+    assert s["pos_err_beyond"] == pytest.approx(0.3) and s["vel_err_beyond"] == pytest.approx(0.5)
+    assert s["matched"] == 1 and s["matched_beyond"] == 1
+    both = PerceptionMetrics.combine([m, m])
+    assert both["visible_by_distance"]["7-8"] == 2 and both["recall_beyond_4m"] == pytest.approx(0.5)
+    assert both["matched_beyond"] == 2
+    assert RECALL_BINS[0] == 0.5 and RECALL_BINS[-1] == 10.0
