@@ -137,7 +137,7 @@ class DODT:
                 d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
         t5 = time.perf_counter()
         timings.update(udepth=(t1 - t0) * 1e3, dbscan=(t2 - t1) * 1e3, ensemble=(t3 - t2 + t5 - t4) * 1e3,
-                       learned=(t4 - t3) * 1e3)
+                       learned=(t4 - t3) * 1e3 if self.learned_detector is not None else 0.0)
         learned = list(getattr(self.learned_detector, "last_3d", []))
         return dets, {"udepth": ud, "dbscan": db, "learned": learned, "ensemble": dets, "timings": timings}
 

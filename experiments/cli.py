@@ -6,10 +6,12 @@ wrong and exit with status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
 
+from dodt.learned.model import ModelError
 from sim.scenario import ScenarioError, load_scenario, shipped_scenarios
 
 
@@ -203,6 +205,65 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
+def _detector_data(args) -> Path:
+    """The dataset folder, generated split by split where missing (seeds never shared)."""
+    from experiments.detector import dataset
+    from experiments.sweep import SweepError, parse_seeds
+
+    try:
+        train_seeds, val_seeds = parse_seeds(args.train_seeds), parse_seeds(args.val_seeds)
+        dataset.check_disjoint(train_seeds, val_seeds)
+    except (SweepError, ValueError) as e:
+        raise UserError(str(e).replace("--seeds", "--train-seeds/--val-seeds")) from None
+    if args.images_per_seed < 1:
+        raise UserError("--images-per-seed: must be >= 1")
+    data = Path(args.data)
+    for split, seeds in (("train", train_seeds), ("val", val_seeds)):
+        if not (data / f"{split}.npz").is_file():
+            print(f"rendering the {split} split: {len(seeds)} seeds x {args.images_per_seed} images into {data}",
+                  flush=True)
+            dataset.generate(data, split, seeds, args.images_per_seed)
+    return data
+
+
+def _cmd_train_detector(args) -> int:
+    try:
+        import torch  # noqa: F401  (training only; run time uses onnxruntime)
+    except ImportError:
+        raise UserError("training needs PyTorch: pip install torch==2.13.0 onnx (or pip install -e '.[train]')") from None
+    if args.epochs < 1:
+        raise UserError("--epochs: must be >= 1")
+    from experiments.detector.train import train
+
+    data = _detector_data(args)
+    if args.threads < 1:
+        raise UserError("--threads: must be >= 1")
+    command = (f"dodt-nav train-detector --data {args.data} --train-seeds {args.train_seeds} --val-seeds "
+               f"{args.val_seeds} --images-per-seed {args.images_per_seed} --epochs {args.epochs} --seed {args.seed} "
+               f"--threads {args.threads}")
+    record = train(data, Path(args.out), epochs=args.epochs, seed=args.seed, threads=args.threads, command=command)
+    print(f"wrote {args.out}/person_detector.onnx and person_detector.json; validation: "
+          + json.dumps(record.get("validation", {}))[:400])
+    return 0
+
+
+def _cmd_eval_detector(args) -> int:
+    from dodt.learned.model import SHIPPED_MODEL, load_record
+    from experiments.detector.evaluate import average_precision
+
+    model = Path(args.model) if args.model else SHIPPED_MODEL
+    load_record(model)  # a missing or corrupt model stops here with its name
+    data = _detector_data(args)
+    r = average_precision(model, data / "val.npz", max_distance=args.max_distance)
+    keys = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()
+                     if not isinstance(v, dict))
+    print(f"{model.name} on {data / 'val.npz'}: {keys}")
+    for k, v in r.items():
+        if isinstance(v, dict):
+            print(f"  {k}: " + ", ".join(f"{b} {x:.3f}" if isinstance(x, float) else f"{b} {x}" for b, x in v.items()))
+    return 0
+
+
 def _cmd_scenarios(args) -> int:
     for name in shipped_scenarios():
         sc = load_scenario(name)
@@ -291,6 +352,25 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes")
     rep.set_defaults(func=_cmd_reproduce)
 
+    for name, func, text in (("train-detector", _cmd_train_detector,
+                              "render the person dataset (where missing) and train the learned detector (PyTorch)"),
+                             ("eval-detector", _cmd_eval_detector,
+                              "validation AP@0.5 of a person detector model through onnxruntime")):
+        d = sub.add_parser(name, help=text)
+        d.add_argument("--data", default="runs/detector_data", help="dataset folder (train.npz, val.npz)")
+        d.add_argument("--train-seeds", default="0:200", help="scene seeds of the training split")
+        d.add_argument("--val-seeds", default="1000:1040", help="scene seeds of the validation split")
+        d.add_argument("--images-per-seed", type=int, default=20, help="images rendered per scene")
+        if name == "train-detector":
+            d.add_argument("--epochs", type=int, default=60)
+            d.add_argument("--seed", type=int, default=0, help="training seed (weights, data order, augmentation)")
+            d.add_argument("--threads", type=int, default=2, help="PyTorch threads (the result depends on it)")
+            d.add_argument("--out", default="runs/detector", help="folder for person_detector.onnx and .json")
+        else:
+            d.add_argument("--model", default=None, help="an ONNX model with its .json (default: the shipped one)")
+            d.add_argument("--max-distance", type=float, default=10.0, help="people within this distance count")
+        d.set_defaults(func=func)
+
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)
 
@@ -304,7 +384,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ScenarioError, UserError) as e:
+    except (ScenarioError, UserError, ModelError) as e:
         print(f"dodt-nav: error: {e}", file=sys.stderr)
         return 2
     except OSError as e:

@@ -1,0 +1,479 @@
+"""Train the person detector (experiments.detector.net) on rendered data and export it to ONNX.
+
+Targets (FastestDet's assignment, one documented change): with the decode
+cx = (gx + tanh tx) / GRID_W, a cell can place a centre anywhere in (gx - 1, gx + 1), so the
+cells that can reach a box centre at grid position (cx, cy) are floor(c) and floor(c) + 1 on each
+axis: FastestDet assigns all four. We keep those whose needed offset |c - g| is at most
+MAX_OFFSET on both axes (a tanh far in its tails learns slowly) and leave the others out of the
+objectness loss (neither positive nor negative). The centre cell is always kept. Where two boxes
+claim a cell, the larger box keeps it.
+
+Losses: box regression by GIoU on the decoded boxes of the positive cells; objectness by binary
+cross-entropy with an IoU-aware target on the positives (0.5 + 0.5 IoU of the cell's current
+box, detached, so the score ranks well-placed boxes first, which NMS keeps) and 0 elsewhere,
+both normalised by the number of positives. Total = objectness + REG_WEIGHT * regression.
+
+Augmentation (our renderer has little lighting variety): random scale (0.7-1.4) and translate
+(up to 20 % of the image) with the border filled by the image's mean colour, boxes clipped and
+dropped when less than KEEP_FRACTION of their area stays in view (the rest of those are ignored
+by the objectness loss); horizontal flip; photometric jitter (gain per channel, brightness,
+contrast, saturation, gamma, Gaussian noise, Gaussian blur).
+
+AdamW, linear warm-up then cosine decay; an exponential moving average of the weights is what
+is evaluated and exported. Everything follows from the seed (torch.manual_seed, one numpy
+Generator for data order and augmentation, deterministic algorithms, a fixed thread count).
+"""
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from copy import deepcopy
+from pathlib import Path
+
+import numpy as np
+
+from dodt.learned import layout
+from dodt.learned.model import sha256_of
+from experiments.detector import evaluate
+
+MODEL_NAME = "person_detector"
+MAX_OFFSET = 0.85  # grid cells: the largest centre offset a positive cell must reach
+KEEP_FRACTION = 0.45  # of a box's area left in view after a crop, to keep it as a target
+REG_WEIGHT = 2.0
+IOU_TARGET_FLOOR = 0.5  # objectness target of a positive = floor + (1 - floor) * IoU
+NMS_IOU = evaluate.NMS_IOU
+OPSET = 17
+MAX_ONNX_BYTES = 2 * 1024 * 1024
+
+
+# --------------------------------------------------------------------------- data
+
+
+def load_data(path) -> dict:
+    """images (N, H, W, 3) uint8 at the network size; per-image boxes (K, 6)."""
+    data = evaluate.load_split(path)
+    if data["images"].shape[1:] != (layout.INPUT_H, layout.INPUT_W, 3):
+        raise ValueError(f"{path}: images must be (N, {layout.INPUT_H}, {layout.INPUT_W}, 3), "
+                         f"got {data['images'].shape}")
+    return data
+
+
+def augment(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One augmented image: (H, W, 3) float32 in [0, 1], kept boxes (K, 4) and ignored boxes (J, 4)
+    as fractions (x1, y1, x2, y2)."""
+    import cv2
+
+    H, W = img.shape[:2]
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    ignored = np.zeros((0, 4))
+    if rng.random() < 0.6:
+        s = math.exp(rng.uniform(math.log(0.7), math.log(1.4)))
+        dx, dy = rng.uniform(-0.2, 0.2, 2)
+        # x' = s (x - 0.5) + 0.5 + dx (fractions)
+        M = np.array([[s, 0.0, ((1 - s) * 0.5 + dx) * W], [0.0, s, ((1 - s) * 0.5 + dy) * H]])
+        fill = tuple(float(v) for v in img.reshape(-1, 3).mean(axis=0))
+        img = cv2.warpAffine(img, M, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                             borderValue=fill)
+        if len(boxes):
+            b = boxes.copy()
+            b[:, [0, 2]] = s * (b[:, [0, 2]] - 0.5) + 0.5 + dx
+            b[:, [1, 3]] = s * (b[:, [1, 3]] - 0.5) + 0.5 + dy
+            area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+            c = b.clip(0.0, 1.0)
+            frac = (c[:, 2] - c[:, 0]).clip(0) * (c[:, 3] - c[:, 1]).clip(0) / np.maximum(area, 1e-12)
+            big_enough = ((c[:, 3] - c[:, 1]) * H >= 3) & ((c[:, 2] - c[:, 0]) * W >= 2)
+            keep = (frac >= KEEP_FRACTION) & big_enough
+            ignored = c[(~keep) & (frac > 0)]
+            boxes = c[keep]
+    if rng.random() < 0.5:
+        img = img[:, ::-1]
+        boxes = np.stack([1 - boxes[:, 2], boxes[:, 1], 1 - boxes[:, 0], boxes[:, 3]], axis=1).reshape(-1, 4)
+        ignored = np.stack([1 - ignored[:, 2], ignored[:, 1], 1 - ignored[:, 0], ignored[:, 3]], axis=1).reshape(-1, 4)
+    x = np.ascontiguousarray(img, dtype=np.float32) * np.float32(1 / 255)
+    # Photometric jitter.
+    if rng.random() < 0.8:
+        gain = rng.uniform(0.85, 1.15, 3) * rng.uniform(0.6, 1.4)
+        x *= gain.astype(np.float32)
+    if rng.random() < 0.6:
+        m = np.float32(x.mean())
+        x = (x - m) * np.float32(rng.uniform(0.6, 1.4)) + m
+    if rng.random() < 0.5:
+        gray = x.mean(axis=2, keepdims=True)
+        x = gray + (x - gray) * np.float32(rng.uniform(0.3, 1.6))
+    np.clip(x, 0.0, 1.0, out=x)
+    if rng.random() < 0.5:
+        x = np.power(x, np.float32(math.exp(rng.uniform(math.log(0.6), math.log(1.6)))))
+    if rng.random() < 0.25:
+        x = cv2.GaussianBlur(x, (0, 0), float(rng.uniform(0.4, 1.3)))
+    if rng.random() < 0.4:
+        x = x + rng.standard_normal(x.shape, dtype=np.float32) * np.float32(rng.uniform(0.005, 0.04))
+    np.clip(x, 0.0, 1.0, out=x)
+    return x, boxes, ignored
+
+
+def build_targets(boxes_per_image: list[np.ndarray], ignored_per_image: list[np.ndarray]):
+    """Per-cell targets: box (B, GH, GW, 4) as (x1, y1, x2, y2) fractions, positive mask and
+    ignore mask (B, GH, GW)."""
+    GH, GW = layout.GRID_H, layout.GRID_W
+    B = len(boxes_per_image)
+    tbox = np.zeros((B, GH, GW, 4), np.float32)
+    pos = np.zeros((B, GH, GW), bool)
+    ign = np.zeros((B, GH, GW), bool)
+
+    def cells(box):
+        cx, cy = (box[0] + box[2]) / 2 * GW, (box[1] + box[3]) / 2 * GH
+        ix, iy = min(int(cx), GW - 1), min(int(cy), GH - 1)
+        out = []
+        for gx in (ix, ix + 1):
+            for gy in (iy, iy + 1):
+                if gx >= GW or gy >= GH:
+                    continue
+                reach = abs(cx - gx) <= MAX_OFFSET and abs(cy - gy) <= MAX_OFFSET
+                out.append((gx, gy, reach or (gx == ix and gy == iy)))
+        return out
+
+    for b, (boxes, ignored) in enumerate(zip(boxes_per_image, ignored_per_image)):
+        for box in ignored:
+            for gx, gy, _ in cells(box):
+                ign[b, gy, gx] = True
+        if len(boxes):
+            area = (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+            for k in np.argsort(area, kind="stable"):  # the larger box is written last and keeps the cell
+                for gx, gy, positive in cells(boxes[k]):
+                    if positive:
+                        pos[b, gy, gx] = True
+                        tbox[b, gy, gx] = boxes[k]
+                    else:
+                        ign[b, gy, gx] = True
+    ign &= ~pos
+    return tbox, pos, ign
+
+
+# --------------------------------------------------------------------------- model side
+
+
+def _torch():
+    import torch
+
+    return torch
+
+
+def decode_torch(reg, gx, gy):
+    """(P, 4) raw (tx, ty, tw, th) at cells (gx, gy) -> (P, 4) boxes (x1, y1, x2, y2), fractions."""
+    torch = _torch()
+    cx = (gx + torch.tanh(reg[:, 0])) / layout.GRID_W
+    cy = (gy + torch.tanh(reg[:, 1])) / layout.GRID_H
+    w = torch.sigmoid(reg[:, 2])
+    h = torch.sigmoid(reg[:, 3])
+    return torch.stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], dim=1)
+
+
+def giou(a, b):
+    """IoU and generalised IoU of matching rows of (P, 4) boxes."""
+    torch = _torch()
+    x1 = torch.maximum(a[:, 0], b[:, 0])
+    y1 = torch.maximum(a[:, 1], b[:, 1])
+    x2 = torch.minimum(a[:, 2], b[:, 2])
+    y2 = torch.minimum(a[:, 3], b[:, 3])
+    inter = (x2 - x1).clamp(min=0) * (y2 - y1).clamp(min=0)
+    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
+    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    union = area_a + area_b - inter + 1e-9
+    iou = inter / union
+    ex1 = torch.minimum(a[:, 0], b[:, 0])
+    ey1 = torch.minimum(a[:, 1], b[:, 1])
+    ex2 = torch.maximum(a[:, 2], b[:, 2])
+    ey2 = torch.maximum(a[:, 3], b[:, 3])
+    enclose = (ex2 - ex1) * (ey2 - ey1) + 1e-9
+    return iou, iou - (enclose - union) / enclose
+
+
+def detection_loss(out, tbox, pos, ign):
+    """(total, objectness, regression) for a batch of raw outputs (B, 5, GH, GW)."""
+    torch = _torch()
+    F = torch.nn.functional
+    obj = out[:, 0]
+    b, gy, gx = torch.nonzero(pos, as_tuple=True)
+    n_pos = max(int(b.numel()), 1)
+    target = torch.zeros_like(obj)
+    if b.numel():
+        reg = out[b, 1:, gy, gx]
+        pred = decode_torch(reg, gx.to(out.dtype), gy.to(out.dtype))
+        iou, g = giou(pred, tbox[b, gy, gx])
+        reg_loss = (1.0 - g).sum() / n_pos
+        target[b, gy, gx] = IOU_TARGET_FLOOR + (1 - IOU_TARGET_FLOOR) * iou.detach().clamp(0, 1)
+    else:
+        reg_loss = out.sum() * 0.0
+    weight = (~ign).to(out.dtype)
+    obj_loss = (F.binary_cross_entropy_with_logits(obj, target, reduction="none") * weight).sum() / n_pos
+    return obj_loss + REG_WEIGHT * reg_loss, obj_loss, reg_loss
+
+
+class EMA:
+    """Exponential moving average of a model's parameters and buffers."""
+
+    def __init__(self, model, decay: float = 0.998, ramp: float = 1000.0):
+        self.model = deepcopy(model).eval()
+        for p in self.model.parameters():
+            p.requires_grad_(False)
+        self.decay, self.ramp, self.updates = decay, ramp, 0
+
+    def update(self, model) -> None:
+        torch = _torch()
+        self.updates += 1
+        d = self.decay * (1 - math.exp(-self.updates / self.ramp))
+        with torch.no_grad():
+            src = model.state_dict()
+            for k, v in self.model.state_dict().items():
+                if v.dtype.is_floating_point:
+                    v.mul_(d).add_(src[k].detach(), alpha=1 - d)
+                else:
+                    v.copy_(src[k])
+
+
+def predict(model, images: np.ndarray, batch: int = 32) -> np.ndarray:
+    """Raw outputs of a torch model for uint8 images at the network size."""
+    torch = _torch()
+    model.eval()
+    outs = []
+    with torch.no_grad():
+        for i in range(0, len(images), batch):
+            x = torch.from_numpy(layout.to_tensor(images[i:i + batch])).contiguous(memory_format=torch.channels_last)
+            outs.append(model(x).float().numpy())
+    return np.concatenate(outs) if outs else np.zeros((0, layout.CHANNELS, layout.GRID_H, layout.GRID_W), np.float32)
+
+
+def validate(model, data: dict, max_distance: float = 10.0) -> dict:
+    dets = evaluate.decode_all(predict(model, data["images"]), 0.05)
+    return evaluate.evaluate_detections(dets, data["boxes"], max_distance, 0.5)
+
+
+def export_onnx(model, path: Path) -> None:
+    """Fixed-shape ONNX (opset 17): input "images" (1, 3, H, W), output "preds" (1, 5, GH, GW)."""
+    torch = _torch()
+    m = deepcopy(model).eval().to(memory_format=torch.contiguous_format)
+    x = torch.zeros(1, 3, layout.INPUT_H, layout.INPUT_W)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    kwargs = dict(input_names=["images"], output_names=["preds"], opset_version=OPSET, do_constant_folding=True)
+    try:
+        torch.onnx.export(m, (x,), str(path), dynamo=False, **kwargs)
+    except TypeError:  # an exporter without the dynamo switch
+        torch.onnx.export(m, (x,), str(path), **kwargs)
+
+
+def check_onnx(model, path: Path, images: np.ndarray) -> float:
+    """Largest |onnxruntime - torch| over the given images (the size limit is checked too)."""
+    torch = _torch()
+    size = path.stat().st_size
+    if size > MAX_ONNX_BYTES:
+        raise RuntimeError(f"{path}: {size} bytes, over the {MAX_ONNX_BYTES} limit")
+    sess = evaluate.onnx_session(path, threads=torch.get_num_threads())
+    ref = predict(model, images)
+    got = evaluate.run_onnx(sess, images)
+    return float(np.max(np.abs(ref - got))) if len(images) else 0.0
+
+
+def lr_at(step: int, total: int, base: float, warmup: int) -> float:
+    if step < warmup:
+        return base * (step + 1) / warmup
+    t = (step - warmup) / max(total - warmup, 1)
+    return base * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(t, 1.0))))
+
+
+# --------------------------------------------------------------------------- training
+
+
+def _meta_summary(meta: dict) -> dict:
+    keys = ("generator", "version", "split", "seeds", "images_per_seed", "counts", "renderers", "rules")
+    return {k: meta[k] for k in keys if k in meta}
+
+
+def train(data_dir, out_dir, epochs: int, seed: int, batch_size: int = 32, threads: int = 2,
+          progress=print, lr: float = 3e-3, weight_decay: float = 5e-4, eval_every: int = 5,
+          warmup_epochs: float = 1.0, command: str | None = None) -> dict:
+    """Train on ``data_dir``/train.npz, validate on ``data_dir``/val.npz, and write to ``out_dir``:
+    person_detector.onnx, person_detector.json (what the run was and its validation figures, also
+    returned), person_detector.pt (the averaged weights) and train_log.jsonl (one row per epoch).
+
+    ``progress`` receives one line per epoch (JSON). The same arguments and thread count give
+    bit-identical weights. torch's global settings (threads, deterministic algorithms, flushing
+    denormals) are set for the run and put back afterwards.
+    """
+    torch = _torch()
+    saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled())
+    try:
+        return _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, weight_decay,
+                      eval_every, warmup_epochs, command)
+    finally:
+        torch.set_num_threads(saved[0])
+        torch.use_deterministic_algorithms(saved[1])
+        torch.set_flush_denormal(False)
+
+
+def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, weight_decay, eval_every,
+           warmup_epochs, command) -> dict:
+    torch = _torch()
+    from experiments.detector.net import build_model, count_parameters
+
+    data_dir, out_dir = Path(data_dir), Path(out_dir)
+    for split in ("train", "val"):
+        if not (data_dir / f"{split}.npz").is_file():
+            raise FileNotFoundError(f"{data_dir / (split + '.npz')}: no such dataset file")
+    if int(epochs) < 1:
+        raise ValueError(f"epochs: must be >= 1, got {epochs}")
+    t_start = time.time()
+    torch.set_num_threads(int(threads))
+    torch.set_flush_denormal(True)  # denormal floats slowed CPU training some 50-fold
+    torch.manual_seed(int(seed))
+    torch.use_deterministic_algorithms(True)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xD7]))
+
+    _mkdir(out_dir)
+    (out_dir / "train_log.jsonl").write_text("")
+    train_data = load_data(data_dir / "train.npz")
+    val_data = load_data(data_dir / "val.npz")
+    n = len(train_data["images"])
+    progress(f"train: {n} images, {sum(len(b) for b in train_data['boxes'])} boxes; "
+             f"val: {len(val_data['images'])} images; threads {threads}, batch {batch_size}")
+
+    model = build_model().to(memory_format=torch.channels_last)
+    n_params = count_parameters(model)
+    decay, no_decay = [], []
+    for name, p in model.named_parameters():
+        (no_decay if p.ndim <= 1 else decay).append(p)
+    opt = torch.optim.AdamW([{"params": decay, "weight_decay": weight_decay},
+                             {"params": no_decay, "weight_decay": 0.0}], lr=lr, betas=(0.9, 0.99))
+    ema = EMA(model)
+    steps_per_epoch = max(n // batch_size, 1)  # the last partial batch is dropped (BatchNorm)
+    total_steps = steps_per_epoch * int(epochs)
+    warmup = max(int(warmup_epochs * steps_per_epoch), 1)
+    curve = []
+    step = 0
+    images_seen = 0
+    train_time = 0.0
+    for epoch in range(1, int(epochs) + 1):
+        model.train()
+        t0 = time.time()
+        order = rng.permutation(n)
+        sums = np.zeros(3)
+        for k in range(steps_per_epoch):
+            idx = order[k * batch_size:(k + 1) * batch_size]
+            xs, bs, igs = [], [], []
+            for i in idx:
+                gt = train_data["boxes"][i]
+                x, b, ig = augment(train_data["images"][i], gt[:, :4], rng)
+                xs.append(x)
+                bs.append(b)
+                igs.append(ig)
+            tbox, pos, ign = build_targets(bs, igs)
+            x = torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2)  # NHWC memory = channels_last
+            for g in opt.param_groups:
+                g["lr"] = lr_at(step, total_steps, lr, warmup)
+            out = model(x)
+            loss, lo, lr_ = detection_loss(out, torch.from_numpy(tbox), torch.from_numpy(pos), torch.from_numpy(ign))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
+            opt.step()
+            ema.update(model)
+            sums += [float(loss.detach()), float(lo.detach()), float(lr_.detach())]
+            step += 1
+            images_seen += len(idx)
+        dt = time.time() - t0
+        train_time += dt
+        row = {"epoch": epoch, "loss": sums[0] / steps_per_epoch, "obj_loss": sums[1] / steps_per_epoch,
+               "reg_loss": sums[2] / steps_per_epoch, "lr": lr_at(step - 1, total_steps, lr, warmup),
+               "images_per_s": steps_per_epoch * batch_size / dt}
+        if eval_every and (epoch % eval_every == 0 or epoch == int(epochs)):
+            v = validate(ema.model, val_data)
+            row.update({"val_ap50": v["ap50"], "val_best_f1_threshold": v["best_f1_threshold"],
+                        "val_precision": v["precision"], "val_recall": v["recall"]})
+            torch.save(ema.model.state_dict(), out_dir / f"{MODEL_NAME}_last.pt")  # in case a run is cut short
+        curve.append(row)
+        progress(json.dumps({k: (round(v, 5) if isinstance(v, float) else v) for k, v in row.items()}))
+        with open(_mkdir(out_dir) / "train_log.jsonl", "a") as f:
+            f.write(json.dumps(row) + "\n")
+
+    # Export the averaged weights and check them.
+    out_dir.mkdir(parents=True, exist_ok=True)
+    final = ema.model
+    torch.save(final.state_dict(), out_dir / f"{MODEL_NAME}.pt")
+    onnx_path = out_dir / f"{MODEL_NAME}.onnx"
+    export_onnx(final, onnx_path)
+    max_diff = check_onnx(final, onnx_path, val_data["images"][:8])
+    if not max_diff < 1e-3:
+        raise RuntimeError(f"{onnx_path}: onnxruntime and torch disagree by {max_diff}")
+    # The operating point: the best-F1 threshold on validation, then the figures through onnxruntime.
+    v_torch = validate(final, val_data)
+    threshold = v_torch["best_f1_threshold"]
+    figures = evaluate.average_precision(onnx_path, data_dir / "val.npz", operating_threshold=threshold,
+                                         threads=threads)
+    figures_15 = evaluate.average_precision(onnx_path, data_dir / "val.npz", max_distance=15.0,
+                                            operating_threshold=threshold, threads=threads)
+    if command is None:
+        command = f"dodt-nav train-detector --data {data_dir} --epochs {int(epochs)} --seed {int(seed)}"
+        if batch_size != 32:
+            command += f" --batch-size {batch_size}"
+        if threads != 2:
+            command += f" --threads {threads}"
+    info = {
+        "model": f"{MODEL_NAME}.onnx",
+        "sha256": sha256_of(onnx_path),
+        "onnx_bytes": onnx_path.stat().st_size,
+        "opset": OPSET,
+        "parameters": n_params,
+        "architecture": "FastestDet-style: ShuffleNetV2-like backbone (repeats %s, channels %s), "
+                        "avg-pooled stride-8 + upsampled stride-32 + stride-16 concat, light SPP "
+                        "(5x5 depthwise stacks 1/2/3, residual), one anchor-free stride-16 head"
+                        % (list(_net_const("STAGE_REPEATS")), list(_net_const("STAGE_CHANNELS"))),
+        "input": {"name": "images", "shape": [1, 3, layout.INPUT_H, layout.INPUT_W],
+                  "format": "RGB float32 in [0, 1], resize_for_network then to_tensor"},
+        "output": {"name": "preds", "shape": [1, layout.CHANNELS, layout.GRID_H, layout.GRID_W],
+                   "decode": "dodt.learned.layout.decode"},
+        "score_threshold": threshold,
+        "nms_iou": NMS_IOU,
+        "command": command,
+        "seed": int(seed),
+        "epochs": int(epochs),
+        "batch_size": int(batch_size),
+        "threads": int(threads),
+        "lr": lr,
+        "weight_decay": weight_decay,
+        "train_data": _meta_summary(train_data["meta"]),
+        "val_data": _meta_summary(val_data["meta"]),
+        "train_images": n,
+        "train_wall_time_s": round(time.time() - t_start, 1),
+        "train_loop_time_s": round(train_time, 1),
+        "images_per_s": round(images_seen / max(train_time, 1e-9), 2),
+        "onnx_max_abs_diff": max_diff,
+        "validation": figures,
+        "validation_15m": {k: figures_15[k] for k in ("ap50", "precision", "recall", "boxes")},
+        "curve": curve,
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+    }
+    (out_dir / f"{MODEL_NAME}.json").write_text(json.dumps(info, indent=1) + "\n")
+    progress(f"validation AP@0.5 (<= 10 m) {figures['ap50']:.4f} at threshold {threshold}: precision "
+             f"{figures['precision']}, recall {figures['recall']}; wrote {onnx_path} ({info['onnx_bytes']} bytes)")
+    return info
+
+
+def _mkdir(p: Path) -> Path:
+    p.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _net_const(name: str):
+    from experiments.detector import net
+
+    return getattr(net, name)
+
+
+if __name__ == "__main__":  # python -m experiments.detector.train DATA OUT EPOCHS SEED [BATCH THREADS]
+    import sys
+
+    a = sys.argv[1:]
+    train(a[0], a[1], int(a[2]), int(a[3]), batch_size=int(a[4]) if len(a) > 4 else 32,
+          threads=int(a[5]) if len(a) > 5 else 2)

@@ -1,0 +1,131 @@
+"""The shipped learned person detector (YOLO-MAD) through onnxruntime: it loads only when its
+checksum matches, finds people in rendered images, and joins the DODT pipeline when switched on."""
+import json
+import shutil
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dodt.config import LearnedConfig
+from dodt.learned import layout
+from dodt.learned.model import SHIPPED_MODEL, ModelError, PersonDetector2D, load_record, sha256_of
+from dodt.pipeline import DODT
+from dodt.presets import PRESETS, preset
+from experiments.cli import main
+from sim import World, load_scenario
+
+
+def _iou(a, b) -> float:
+    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    return inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter)
+
+
+@pytest.fixture(scope="module")
+def rendered():
+    """A few frames of the circles scenario (three people 2.5-6 m away) with segmentation."""
+    sc = load_scenario("circles")
+    out = []
+    with World(sc, seed=0, segmentation=True) as w:
+        for t in (1.0, 4.0, 7.0):
+            w.advance(t - w.time)
+            out.append((w.latest_frame(), w.ground_truth()))
+    return out
+
+
+def test_shipped_model_is_small_recorded_and_checked():
+    rec = load_record(SHIPPED_MODEL)
+    assert SHIPPED_MODEL.stat().st_size <= 2_000_000
+    assert rec["sha256"] == sha256_of(SHIPPED_MODEL)
+    assert rec["parameters"] <= 500_000
+    assert rec["input"]["shape"] == [1, 3, layout.INPUT_H, layout.INPUT_W]
+    assert rec["output"]["shape"] == [1, layout.CHANNELS, layout.GRID_H, layout.GRID_W]
+    assert rec["validation"]["ap50"] > 0.5 and rec["validation"]["boxes"] > 1000  # measured on held-out seeds
+    assert not set(rec["train_data"]["seeds"]) & set(rec["val_data"]["seeds"])
+    assert "train-detector" in rec["command"] and "seed" in rec
+    assert 0.0 < rec["score_threshold"] < 1.0
+    assert "torch" not in sys.modules or "experiments.detector.train" in sys.modules  # run time never needs it
+
+
+def test_shipped_model_finds_the_people_in_rendered_images(rendered):
+    det = PersonDetector2D()
+    found = visible = 0
+    for frame, truth in rendered:
+        boxes, scores = det(frame.color)
+        assert boxes.shape[1] == 4 and np.all(scores >= det.score_threshold)
+        for p in (o for o in truth.obstacles if o.kind == "person"):
+            rows, cols = np.nonzero(truth.segmentation == p.id)
+            if len(rows) < 1500:  # mostly hidden or out of view
+                continue
+            visible += 1
+            gt = (cols.min(), rows.min(), cols.max() + 1, rows.max() + 1)
+            found += any(_iou(gt, b) >= 0.5 for b in boxes)
+    assert visible >= 4
+    assert found >= visible - 1, (found, visible)
+    # and nothing on an empty image
+    boxes, _ = det(np.full((480, 640, 3), 128, np.uint8))
+    assert len(boxes) == 0
+
+
+def test_corrupt_or_missing_model_is_refused_with_its_name(tmp_path):
+    bad = tmp_path / "person_detector.onnx"
+    data = bytearray(SHIPPED_MODEL.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    shutil.copy(SHIPPED_MODEL.with_suffix(".json"), tmp_path / "person_detector.json")
+    with pytest.raises(ModelError, match=r"person_detector.onnx: SHA-256 .* does not match"):
+        PersonDetector2D(bad)
+    with pytest.raises(ModelError, match="SHA-256"):  # the pipeline refuses it at construction
+        DODT(replace(preset("dodt+yolo"), learned=LearnedConfig(enabled=True, model=str(bad))))
+    with pytest.raises(ModelError, match="not found: .*nothing.onnx"):
+        PersonDetector2D(tmp_path / "nothing.onnx")
+    lone = tmp_path / "lone.onnx"
+    shutil.copy(SHIPPED_MODEL, lone)
+    with pytest.raises(ModelError, match="no record lone.json"):
+        PersonDetector2D(lone)
+    (tmp_path / "lone.json").write_text("{not json")
+    with pytest.raises(ModelError, match="lone.json: not a readable JSON record"):
+        PersonDetector2D(lone)
+    (tmp_path / "lone.json").write_text(json.dumps({"sha256": sha256_of(SHIPPED_MODEL)}))
+    assert PersonDetector2D(lone).score_threshold == 0.5  # a record without a threshold: 0.5
+
+
+def test_cli_reports_a_corrupt_model_in_one_line(tmp_path, capsys):
+    bad = tmp_path / "m.onnx"
+    bad.write_bytes(b"not a model")
+    (tmp_path / "m.json").write_text(json.dumps({"sha256": "0" * 64}))
+    assert main(["eval-detector", "--model", str(bad), "--data", str(tmp_path / "data")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "m.onnx: SHA-256" in err
+
+
+def test_pipeline_without_the_module_needs_no_model(monkeypatch, rendered):
+    monkeypatch.setattr("dodt.learned.model.SHIPPED_MODEL", SHIPPED_MODEL.parent / "absent.onnx")
+    r = DODT(preset("dodt")).process(rendered[0][0])
+    assert r.timings_ms["learned"] == 0.0
+    with pytest.raises(ModelError, match="absent.onnx"):
+        DODT(preset("dodt+yolo"))
+
+
+def test_dodt_yolo_marks_people_dynamic_from_the_first_frames():
+    """With the module on, a walking person is labelled dynamic within a few frames (a person box
+    is dynamic at once); point voting alone needs its consistency window first."""
+    assert "dodt+yolo" in PRESETS and preset("dodt+yolo").learned.enabled
+    sc = load_scenario("circles")
+    first_dynamic = {}
+    with World(sc, seed=0, segmentation=False) as w:
+        pipes = {c: DODT(preset(c)) for c in ("dodt", "dodt+yolo")}
+        frames = [w.latest_frame()] + [f for f in w.advance(1.0) if f is not None]
+    for c, pipe in pipes.items():
+        for i, f in enumerate(frames):
+            r = pipe.process(f)
+            if r.dynamic and c not in first_dynamic:
+                first_dynamic[c] = i
+        if c == "dodt+yolo":
+            assert r.timings_ms["learned"] > 0.0
+            assert any(o.is_person for o in r.obstacles)
+    assert first_dynamic["dodt+yolo"] <= 3
+    assert first_dynamic["dodt+yolo"] < first_dynamic.get("dodt", len(frames))
