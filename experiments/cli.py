@@ -254,7 +254,8 @@ def _cmd_eval_detector(args) -> int:
     model = Path(args.model) if args.model else SHIPPED_MODEL
     load_record(model)  # a missing or corrupt model stops here with its name
     data = _detector_data(args)
-    r = average_precision(model, data / "val.npz", max_distance=args.max_distance)
+    r = average_precision(model, data / "val.npz", max_distance=args.max_distance, nms_iou=args.nms_iou,
+                          min_visible_px=args.min_visible_px)
     keys = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()
                      if not isinstance(v, dict))
     print(f"{model.name} on {data / 'val.npz'}: {keys}")
@@ -369,6 +370,9 @@ def build_parser() -> argparse.ArgumentParser:
         else:
             d.add_argument("--model", default=None, help="an ONNX model with its .json (default: the shipped one)")
             d.add_argument("--max-distance", type=float, default=10.0, help="people within this distance count")
+            d.add_argument("--nms-iou", type=float, default=0.45, help="non-maximum suppression IoU (FastestDet's 0.45)")
+            d.add_argument("--min-visible-px", type=int, default=0,
+                           help="ignore people showing fewer pixels at 640x480 (the perception metrics use 400)")
         d.set_defaults(func=func)
 
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")

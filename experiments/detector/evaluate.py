@@ -178,15 +178,18 @@ def decode_all(preds: np.ndarray, score_threshold: float, nms_iou: float = NMS_I
 
 
 def evaluate_detections(detections, gt_boxes: list[np.ndarray], max_distance: float = 10.0, iou: float = 0.5,
-                        operating_threshold: float | None = None) -> dict:
+                        operating_threshold: float | None = None, min_visible_px: int = 0) -> dict:
     """Figures for decoded detections [(boxes, scores)] against per-image ground truth (K, >=5)
-    rows (x1, y1, x2, y2, distance, ...). Without ``operating_threshold`` the best-F1 one is used
-    (and reported as ``best_f1_threshold``)."""
+    rows (x1, y1, x2, y2, distance, visible pixels). Without ``operating_threshold`` the best-F1
+    one is used (and reported as ``best_f1_threshold``). People showing fewer than
+    ``min_visible_px`` pixels (at 640x480) are ignored like people beyond ``max_distance``."""
     matches, dists, ignores = [], [], []
     for (boxes, scores), gt in zip(detections, gt_boxes):
         gt = np.asarray(gt, np.float64)
         gt = gt if gt.ndim == 2 else gt.reshape(-1, 5)
         ignore = gt[:, 4] > max_distance
+        if min_visible_px > 0 and gt.shape[1] > 5:
+            ignore |= gt[:, 5] < min_visible_px
         matches.append(match_image(boxes, scores, gt[:, :4], ignore, iou))
         dists.append(gt[:, 4])
         ignores.append(ignore)
@@ -196,6 +199,7 @@ def evaluate_detections(detections, gt_boxes: list[np.ndarray], max_distance: fl
     out["best_f1_threshold"] = best
     out["max_distance"] = float(max_distance)
     out["iou"] = float(iou)
+    out["min_visible_px"] = int(min_visible_px)
     return out
 
 
@@ -244,7 +248,7 @@ def recommended_threshold(model_path) -> float | None:
 
 def average_precision(model_path, npz_path, max_distance: float = 10.0, iou: float = 0.5,
                       score_threshold: float = 0.05, operating_threshold: float | None = None,
-                      threads: int = 2, nms_iou: float = NMS_IOU) -> dict:
+                      threads: int = 2, nms_iou: float = NMS_IOU, min_visible_px: int = 0) -> dict:
     """AP@``iou`` (VOC all-point) of the ONNX model on a dataset file, for the people within
     ``max_distance``; detections below ``score_threshold`` are dropped before NMS (IoU ``nms_iou``,
     FastestDet's 0.45 by default).
@@ -266,7 +270,7 @@ def average_precision(model_path, npz_path, max_distance: float = 10.0, iou: flo
     data = load_split(npz_path)
     preds = run_onnx(onnx_session(model_path, threads), data["images"])
     out = evaluate_detections(decode_all(preds, score_threshold, nms_iou), data["boxes"], max_distance, iou,
-                              operating_threshold)
+                              operating_threshold, min_visible_px)
     out["score_threshold"] = float(score_threshold)
     out["nms_iou"] = float(nms_iou)
     return out

@@ -129,3 +129,18 @@ def test_dodt_yolo_marks_people_dynamic_from_the_first_frames():
             assert any(o.is_person for o in r.obstacles)
     assert first_dynamic["dodt+yolo"] <= 3
     assert first_dynamic["dodt+yolo"] < first_dynamic.get("dodt", len(frames))
+
+
+def test_evaluation_ignores_fragments_only_when_asked():
+    """A person showing 100 pixels and missed costs recall; with min_visible_px 400 it is ignored,
+    and a detection on it is neither a true nor a false positive."""
+    from experiments.detector.evaluate import evaluate_detections
+
+    gt = [np.array([[0.1, 0.1, 0.3, 0.6, 4.0, 5000.0], [0.6, 0.2, 0.62, 0.3, 5.0, 100.0]])]
+    hit = [(np.array([[0.1, 0.1, 0.3, 0.6]], np.float32), np.array([0.9], np.float32))]
+    strict = evaluate_detections(hit, gt, operating_threshold=0.5)
+    lenient = evaluate_detections(hit, gt, operating_threshold=0.5, min_visible_px=400)
+    assert strict["recall"] == 0.5 and strict["ap50"] == pytest.approx(0.5)
+    assert lenient["recall"] == 1.0 and lenient["ap50"] == pytest.approx(1.0) and lenient["boxes_ignored"] == 1
+    both = [(np.array([[0.1, 0.1, 0.3, 0.6], [0.6, 0.2, 0.62, 0.3]], np.float32), np.array([0.9, 0.8], np.float32))]
+    assert evaluate_detections(both, gt, operating_threshold=0.5, min_visible_px=400)["precision"] == 1.0
