@@ -159,14 +159,27 @@ class LearnedConfig:
     threads: int = 1  # onnxruntime intra-op threads
     mad_n: float = 1.5  # depths within median +- n MAD belong to the object, ref (the paper leaves n open)
     margin_px: int = 2  # px cut from each side of the 2D box before reading depths (ours)
+    # the box's central part read for the depth (fractions of its width and height; ours): the torso
+    core_x: tuple[float, float] = (0.3, 0.7)
+    core_y: tuple[float, float] = (0.15, 0.6)
     min_depth_pixels: int = 20  # fewer valid depths in the box: no 3D box (ours)
     depth_min: float = 0.2  # m, valid depths for lifting
     depth_max: float = 10.0  # m: beyond the ensemble's 5 m, the module's range extension
     min_thickness: float = 0.3  # m: the 3D box is at least this deep (ours)
-    center_behind_median: float = 0.1  # m: box centre behind the median depth of the visible surface (ours)
+    center_behind_median: float = 0.05  # m: box centre behind the median depth of the visible surface (ours)
     person_size: tuple[float, float, float] = (0.5, 0.5, 1.8)  # m, ref humanSize for the size sanity rule
     overwrite_distance: float = 3.0  # m, ref yolo_overwrite_distance: closer unmatched boxes are dropped
     iou_threshold: float = 0.05  # mutual best match with a fused box, ref
+    # what a mutual best match becomes: "fused" (ours: the geometric box, measured from depth,
+    # marked a person) or "union" (ref: the union of the two boxes)
+    match_box: str = "fused"
+    # an unmatched learned box this close (m, horizontally) to a fused box is taken for a second,
+    # misplaced view of it and dropped (ours; the ref adds it as a new obstacle)
+    duplicate_gate: float = 0.6
+    # a track is a person when this many of its last person_window detections were person boxes
+    # (ours; the ref uses the latest box alone)
+    person_window: int = 3
+    person_min: int = 2
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,12 @@ class Track:
         self.candidates: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic_history: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic = False
-        self.is_person = det.is_person
+        # A person box from the learned detector makes the track a person (dynamic at once) only
+        # when it recurs: person_min of the last person_window matched detections (ours; a
+        # single false box would otherwise label a static obstacle dynamic for good).
+        lc = cfg.learned
+        self.person_votes: deque[bool] = deque([det.is_person], maxlen=lc.person_window)
+        self.is_person = sum(self.person_votes) >= lc.person_min
         self.coasting = False
         self.missed = 0  # consecutive frames without a detection
 
@@ -102,7 +107,8 @@ class Track:
         self.clouds.append((seq, stamp, det.points))
         self.last_seen = stamp
         self.missed = 0
-        self.is_person = self.is_person or det.is_person
+        self.person_votes.append(det.is_person)
+        self.is_person = sum(self.person_votes) >= self.cfg.learned.person_min
         self.coasting = False
 
     def identify(self, seq: int, poses: dict, cloud_tree, K: CameraIntrinsics, max_depth: float) -> None:

@@ -2,11 +2,13 @@
 step 2), and the module the pipeline calls.
 
 - A learned box that is the mutual best match of a fused box (both IoUs above the threshold)
-  replaces it by the union of the two, marked a person (dynamic at once in identification).
+  marks it a person (dynamic in identification once the track's person boxes recur); the box
+  stays the geometric one, measured from depth (``match_box = "union"``: the reference's union).
 - A learned box that overlaps no fused box is added when it is at least ``overwrite_distance``
   from the camera: there the depth is too sparse for the geometric detectors, which is what the
   module is for; closer, the geometric detectors should have seen it, and it is taken for a
-  learned detector's mistake.
+  learned detector's mistake. Ours: also dropped when it lies within ``duplicate_gate`` of a
+  fused box, a second, misplaced view of an obstacle already there.
 - A learned box that overlaps fused boxes without being a mutual best match is dropped.
 """
 from __future__ import annotations
@@ -35,15 +37,27 @@ def fuse_learned(fused: list[Detection], learned: list[Detection], camera: np.nd
         iou = np.zeros((len(learned), 0))
     for i, j in mutual_best_pairs(iou, cfg.iou_threshold):
         a, b = learned[i], fused[j]
-        lo, hi = np.minimum(a.lower, b.lower), np.maximum(a.upper, b.upper)
-        merged = Detection.from_bounds(lo, hi, source="ensemble+learned")
+        if cfg.match_box == "union":
+            lo, hi = np.minimum(a.lower, b.lower), np.maximum(a.upper, b.upper)
+            merged = Detection.from_bounds(lo, hi, source="ensemble+learned")  # no points: the pipeline adds them
+        else:
+            merged = Detection(center=b.center.copy(), size=b.size.copy(), source="ensemble+learned", points=b.points)
         merged.is_person = True
-        out[j] = merged  # no points: the pipeline gives it the filtered points inside it
+        out[j] = merged
     for i, d in enumerate(learned):
         overlaps = iou.shape[1] > 0 and bool(np.any(iou[i] > 0))
-        if not overlaps and np.linalg.norm(d.center - camera) >= cfg.overwrite_distance:
-            out.append(d)
+        if overlaps or np.linalg.norm(d.center - camera) < cfg.overwrite_distance:
+            continue
+        if fused and min(_gap_xy(d.center, f) for f in fused) < cfg.duplicate_gate:
+            continue
+        out.append(d)
     return out
+
+
+def _gap_xy(point: np.ndarray, box: Detection) -> float:
+    """Horizontal distance from a point to a box (0 inside it)."""
+    d = np.maximum(np.abs(point[:2] - box.center[:2]) - box.size[:2] / 2, 0.0)
+    return float(np.hypot(d[0], d[1]))
 
 
 class YoloMAD:

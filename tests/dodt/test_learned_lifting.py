@@ -53,8 +53,9 @@ def test_mad_lifting_finds_the_person_among_clutter(x, y):
     depth, box = _scene(x, y)
     det = lift_box(depth, box, K, T, CFG)
     assert det is not None and det.is_person and det.source == "learned"
-    # the person's centre along the view (world x) within 10 cm, sideways within 10 cm
-    assert abs(det.center[0] - x) < 0.10, det.center
+    # the person's depth: its surface facing the camera (world x - radius) within 10 cm, the box
+    # centred center_behind_median behind it; sideways within 10 cm
+    assert abs(det.center[0] - CFG.center_behind_median - (x - 0.17)) < 0.10, det.center
     assert abs(det.center[1] - y) < 0.10, det.center
     assert 0.2 < det.size[0] < 1.0 and 0.2 < det.size[1] < 1.0
     assert det.lower[2] < 0.15 and 1.5 < det.upper[2] < 2.0
@@ -96,11 +97,13 @@ def _box(c, s=(0.5, 0.5, 1.7), person=False, source="ensemble"):
     return d
 
 
-def test_fusion_mutual_best_match_becomes_a_union_person_box():
+def test_fusion_mutual_best_match_marks_the_fused_box_a_person():
     fused = [_box((3, 0, 0.85)), _box((3, 2, 0.85))]
     learned = [_box((3.2, 0.1, 0.9), (0.5, 0.5, 1.8), True, "learned")]
-    out = fuse_learned(fused, learned, np.zeros(3), CFG)
+    out = fuse_learned(fused, learned, np.zeros(3), CFG)  # default: the geometric box is kept
     assert len(out) == 2 and out[1] is fused[1]
+    assert out[0].is_person and np.allclose(out[0].center, fused[0].center) and np.allclose(out[0].size, fused[0].size)
+    out = fuse_learned(fused, learned, np.zeros(3), LearnedConfig(match_box="union"))  # the reference's union
     m = out[0]
     assert m.is_person and np.allclose(m.lower, np.minimum(fused[0].lower, learned[0].lower))
     assert np.allclose(m.upper, np.maximum(fused[0].upper, learned[0].upper))
@@ -116,9 +119,33 @@ def test_fusion_unmatched_far_box_is_added_near_one_dropped():
     assert fuse_learned([], [far, near], np.zeros(3), CFG) == [far]
 
 
+def test_fusion_drops_an_unmatched_box_right_beside_a_fused_one():
+    fused = [_box((6, 0, 0.85))]
+    beside = _box((6.7, 0.0, 0.9), (0.5, 0.5, 1.8), True, "learned")  # 0.2 m from the fused box's face
+    away = _box((8.0, 0.0, 0.9), (0.5, 0.5, 1.8), True, "learned")
+    assert fuse_learned(fused, [beside, away], np.zeros(3), CFG)[1:] == [away]
+    assert fuse_learned(fused, [beside], np.zeros(3), LearnedConfig(duplicate_gate=0.0))[1:] == [beside]
+
+
 def test_fusion_overlap_without_mutual_best_match_is_dropped():
     fused = [_box((5, 0, 0.85))]
     a = _box((5.05, 0, 0.9), (0.5, 0.5, 1.8), True, "learned")  # the fused box's best match
     b = _box((5.4, 0.1, 0.9), (0.5, 0.5, 1.8), True, "learned")  # overlaps it, beaten by a
     out = fuse_learned(fused, [a, b], np.zeros(3), CFG)
     assert len(out) == 1 and out[0].is_person
+
+
+def test_a_track_is_a_person_only_when_person_boxes_recur():
+    from dodt.config import DODTConfig
+    from dodt.tracker import Track
+
+    cfg = DODTConfig()
+    tr = Track(1, _box((3, 0, 0.85), person=True), 0, 0.0, cfg)
+    assert not tr.is_person  # one box: 1 of person_window, fewer than person_min
+    tr.update(_box((3, 0, 0.85)), 1, 0.033)
+    assert not tr.is_person
+    tr.update(_box((3, 0, 0.85), person=True), 2, 0.067)
+    assert tr.is_person  # 2 of the last 3
+    tr.update(_box((3, 0, 0.85)), 3, 0.1)
+    tr.update(_box((3, 0, 0.85)), 4, 0.133)
+    assert not tr.is_person  # a false box does not label a static obstacle for good
