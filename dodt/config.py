@@ -162,11 +162,14 @@ class LearnedConfig:
     # the box's central part read for the depth (fractions of its width and height; ours): the torso
     core_x: tuple[float, float] = (0.3, 0.7)
     core_y: tuple[float, float] = (0.15, 0.6)
+    # d~, the depth the MAD range is centred on: this percentile of the core's depths (50: the
+    # paper's median; lower leans to the nearer surface, the person before the background)
+    depth_percentile: float = 30.0
     min_depth_pixels: int = 20  # fewer valid depths in the box: no 3D box (ours)
     depth_min: float = 0.2  # m, valid depths for lifting
     depth_max: float = 10.0  # m: beyond the ensemble's 5 m, the module's range extension
     min_thickness: float = 0.3  # m: the 3D box is at least this deep (ours)
-    center_behind_median: float = 0.05  # m: box centre behind the median depth of the visible surface (ours)
+    center_behind_median: float = 0.1  # m: box centre behind the median depth of the visible surface (ours)
     person_size: tuple[float, float, float] = (0.5, 0.5, 1.8)  # m, ref humanSize for the size sanity rule
     overwrite_distance: float = 3.0  # m, ref yolo_overwrite_distance: closer unmatched boxes are dropped
     iou_threshold: float = 0.05  # mutual best match with a fused box, ref
