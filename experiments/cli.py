@@ -219,7 +219,15 @@ def _detector_data(args) -> Path:
         raise UserError("--images-per-seed: must be >= 1")
     data = Path(args.data)
     for split, seeds in (("train", train_seeds), ("val", val_seeds)):
-        if not (data / f"{split}.npz").is_file():
+        if (data / f"{split}.npz").is_file():
+            import numpy as np
+
+            with np.load(data / f"{split}.npz") as z:
+                meta = json.loads(str(z["meta"])) if "meta" in z else {}
+            if meta.get("seeds") != list(seeds) or meta.get("images_per_seed") != args.images_per_seed:
+                raise UserError(f"{data / (split + '.npz')} was rendered from other seeds or images per seed than "
+                                f"asked; use another --data folder or the same options")
+        else:
             print(f"rendering the {split} split: {len(seeds)} seeds x {args.images_per_seed} images into {data}",
                   flush=True)
             dataset.generate(data, split, seeds, args.images_per_seed)
