@@ -2,6 +2,7 @@
 checksum matches, finds people in rendered images, and joins the DODT pipeline when switched on."""
 import json
 import shutil
+import subprocess
 import sys
 from dataclasses import replace
 
@@ -47,7 +48,18 @@ def test_shipped_model_is_small_recorded_and_checked():
     assert not set(rec["train_data"]["seeds"]) & set(rec["val_data"]["seeds"])
     assert "train-detector" in rec["command"] and "seed" in rec
     assert 0.0 < rec["score_threshold"] < 1.0
-    assert "torch" not in sys.modules or "experiments.detector.train" in sys.modules  # run time never needs it
+
+
+def test_run_time_never_imports_pytorch():
+    code = ("import sys, numpy as np; from dodt.pipeline import DODT; from dodt.presets import preset; "
+            "from dodt.frames import CameraIntrinsics, SensorFrame; K = CameraIntrinsics(); "
+            "f = SensorFrame(depth=np.full((K.height, K.width), 3000, np.uint16), "
+            "color=np.full((K.height, K.width, 3), 90, np.uint8), intrinsics=K, T_world_camera=np.eye(4), stamp=0.0); "
+            "r = DODT(preset('dodt+yolo')).process(f); assert r.timings_ms['learned'] > 0; "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "False"
 
 
 def test_shipped_model_finds_the_people_in_rendered_images(rendered):
