@@ -11,7 +11,7 @@ depths are read from the box's central part, where the torso is (``core_x``, ``c
 whole box when that holds too few valid depths), and d~ is their 30th percentile
 (``depth_percentile``; 50 is the paper's median), which leans to the nearer surface, the person
 before the background: lifted boxes more than 0.5 m from every person fell from 23 % (median of
-the whole box) to 4 % on the circles scenario. The box is at least ``min_thickness`` deep and
+the torso region) to 4 % on the circles scenario. The box is at least ``min_thickness`` deep and
 centred ``center_behind_median`` behind d~ (a body seen from the front shows only its front).
 The world box then passes the reference code's size sanity rule: a dimension less than half or
 more than twice the person size is replaced by it, and a replaced height stands on the floor.
