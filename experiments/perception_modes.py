@@ -67,6 +67,9 @@ class PerceptionModule(Protocol):
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput: ...
 
 
+PERSON_CLEAR_SPEED = 0.4  # m/s: a person-labelled track frees the map only when moving this fast
+
+
 @dataclass(frozen=True)
 class MovingTrackRule:
     """Which tracks the planner avoids as moving obstacles besides those DODT labels dynamic.
@@ -112,7 +115,11 @@ class DODTPerception:
                 continue
             preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=o.velocity,
                                             acceleration=o.acceleration, position_std=o.position_std))
-            if o.dynamic:
+            # The map is freed under DODT's dynamic tracks; under a track dynamic only by the learned
+            # detector's person label, only while it moves: a misplaced person box lifted onto a
+            # wall would otherwise open a hole in the wall (ours; dodt without the module has no
+            # such tracks, so its behaviour is unchanged).
+            if o.dynamic and (not o.is_person or float(np.hypot(o.velocity[0], o.velocity[1])) >= PERSON_CLEAR_SPEED):
                 boxes.append((o.center, o.size))
         return PerceptionOutput(stamp=r.stamp, obstacles=tuple(preds), clear_boxes=tuple(boxes),
                                 tracks=[o.to_json() for o in r.obstacles], timings_ms=dict(r.timings_ms),

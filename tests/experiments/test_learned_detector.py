@@ -169,3 +169,23 @@ def test_eval_detector_renders_missing_data_and_refuses_other_seeds(tmp_path, ca
     assert "train.npz was rendered from other seeds" in capsys.readouterr().err
     assert main(["eval-detector", "--train-seeds", "0:1001", *opts]) == 2  # overlapping splits
     assert "overlap: 1000" in capsys.readouterr().err
+
+
+def test_map_is_freed_under_a_person_label_only_while_it_moves(monkeypatch):
+    """A person-labelled track that stands (e.g. a person box lifted onto a wall) is avoided by the
+    planner but does not free the map; a walking one, or one dynamic by DODT's voting, does."""
+    from dodt.result import PerceptionResult, TrackedObstacle
+    from experiments.perception_modes import PERSON_CLEAR_SPEED, DODTPerception
+
+    def track(tid, speed, person):
+        return TrackedObstacle(id=tid, center=np.array([3.0, tid, 0.9]), size=np.array([0.5, 0.5, 1.8]),
+                               velocity=np.array([speed, 0.0, 0.0]), acceleration=np.zeros(3), dynamic=True,
+                               coasting=False, age=1.0, history=np.zeros((0, 4)), is_person=person)
+
+    perc = DODTPerception("dodt")
+    tracks = (track(1, 0.1, True), track(2, 1.0, True), track(3, 0.1, False))
+    monkeypatch.setattr(perc.dodt, "process", lambda frame: PerceptionResult(0.0, 0, tracks, {}))
+    out = perc.update(None)
+    assert [p.id for p in out.obstacles] == [1, 2, 3]  # all three are avoided
+    assert [c[1] for c, _ in out.clear_boxes] == [2.0, 3.0]  # the standing person label frees nothing
+    assert 0.1 < PERSON_CLEAR_SPEED < 1.0
