@@ -64,11 +64,13 @@ class Track:
         # A person box from the learned detector makes the track a person (dynamic at once) only
         # when it recurs: person_min of the last person_window matched detections (ours; a
         # single false box would otherwise label a static obstacle dynamic for good).
-        lc = cfg.learned
-        self.person_votes: deque[bool] = deque([det.is_person], maxlen=lc.person_window)
-        self.is_person = sum(self.person_votes) >= lc.person_min
+        self.person_votes: deque[bool] = deque([det.is_person], maxlen=cfg.learned.person_window)
         self.coasting = False
         self.missed = 0  # consecutive frames without a detection
+
+    @property
+    def is_person(self) -> bool:
+        return sum(self.person_votes) >= self.cfg.learned.person_min
 
     @property
     def center_xy(self) -> np.ndarray:
@@ -108,7 +110,6 @@ class Track:
         self.last_seen = stamp
         self.missed = 0
         self.person_votes.append(det.is_person)
-        self.is_person = sum(self.person_votes) >= self.cfg.learned.person_min
         self.coasting = False
 
     def identify(self, seq: int, poses: dict, cloud_tree, K: CameraIntrinsics, max_depth: float) -> None:

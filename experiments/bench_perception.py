@@ -23,6 +23,7 @@ import numpy as np
 from dodt.pipeline import DODT, MODULES
 from dodt.presets import PRESETS, preset
 from experiments.perception_metrics import RECALL_BINS, PerceptionMetrics, bin_labels
+from experiments.plots import new_figure
 from sim import World, load_scenario
 from sim.trajectories import scenario_reference
 
@@ -134,15 +135,8 @@ def write_recall_by_distance(out: Path, overall: dict) -> str:
         w.writerow(["configuration"] + labels + ["beyond_4m"])
         for cfg, s in overall.items():
             w.writerow([cfg] + [round(s["recall_by_distance"][b], 4) for b in labels] + [round(s["recall_beyond_4m"], 4)])
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        return text
     mids = [(a + b) / 2 for a, b in zip(RECALL_BINS[:-1], RECALL_BINS[1:])]
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = new_figure(figsize=(7, 4))
     for cfg, s in overall.items():
         main = cfg in ("dodt", "dodt+yolo")
         ax.plot(mids, [100 * s["recall_by_distance"][b] for b in labels], "o-" if main else "-",
@@ -154,22 +148,12 @@ def write_recall_by_distance(out: Path, overall: dict) -> str:
     ax.set_ylim(0, 103)
     ax.legend(fontsize=7, ncol=2)
     ax.set_title("Recall against distance (paper Fig. 10: the learned module's range)")
-    fig.tight_layout()
     fig.savefig(out / "recall_vs_distance.png", dpi=110)
-    plt.close(fig)
     return text
 
 
 def plot(out: Path, scenario: str, metrics: dict, tracks: dict, truth_log: list) -> None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("matplotlib is not installed: no plots (pip install matplotlib)")
-        return
-    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, ax = new_figure(figsize=(8, 6), nrows=2, sharex=True)
     for cfg, m in metrics.items():
         s = np.array(m.series)
         if len(s):
@@ -180,10 +164,8 @@ def plot(out: Path, scenario: str, metrics: dict, tracks: dict, truth_log: list)
     ax[1].set_xlabel("time [s]")
     ax[0].legend(fontsize=7, ncol=2)
     ax[0].set_title(f"{scenario}: errors of dynamic tracks matched to people")
-    fig.tight_layout()
     fig.savefig(out / f"errors_{scenario}.png", dpi=110)
-    plt.close(fig)
-    fig, ax = plt.subplots(figsize=(8, 5))
+    fig, ax = new_figure(figsize=(8, 5))
     for pid in {p[0] for frame in truth_log for p in frame}:
         xy = np.array([(x, y) for frame in truth_log for i, x, y in frame if i == pid])
         ax.plot(xy[:, 0], xy[:, 1], "k-", lw=3, alpha=0.3)
@@ -202,9 +184,7 @@ def plot(out: Path, scenario: str, metrics: dict, tracks: dict, truth_log: list)
     ax.set_title(f"{scenario}: people (grey) and dodt's dynamic tracks, top-down")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7, ncol=3)
-    fig.tight_layout()
     fig.savefig(out / f"topdown_{scenario}.png", dpi=110)
-    plt.close(fig)
 
 
 def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration: float | None = None) -> dict:

@@ -207,6 +207,8 @@ def _cmd_reproduce(args) -> int:
 
 def _detector_data(args) -> Path:
     """The dataset folder, generated split by split where missing (seeds never shared)."""
+    import numpy as np
+
     from experiments.detector import dataset
     from experiments.sweep import SweepError, parse_seeds
 
@@ -220,8 +222,6 @@ def _detector_data(args) -> Path:
     data = Path(args.data)
     for split, seeds in (("train", train_seeds), ("val", val_seeds)):
         if (data / f"{split}.npz").is_file():
-            import numpy as np
-
             with np.load(data / f"{split}.npz") as z:
                 meta = json.loads(str(z["meta"])) if "meta" in z else {}
             if meta.get("seeds") != list(seeds) or meta.get("images_per_seed") != args.images_per_seed:
@@ -241,11 +241,11 @@ def _cmd_train_detector(args) -> int:
         raise UserError("training needs PyTorch: pip install torch==2.13.0 onnx (or pip install -e '.[train]')") from None
     if args.epochs < 1:
         raise UserError("--epochs: must be >= 1")
+    if args.threads < 1:
+        raise UserError("--threads: must be >= 1")
     from experiments.detector.train import train
 
     data = _detector_data(args)
-    if args.threads < 1:
-        raise UserError("--threads: must be >= 1")
     command = (f"dodt-nav train-detector --data {args.data} --train-seeds {args.train_seeds} --val-seeds "
                f"{args.val_seeds} --images-per-seed {args.images_per_seed} --epochs {args.epochs} --seed {args.seed} "
                f"--threads {args.threads}")

@@ -46,7 +46,7 @@ SWEEP_FILES = ("sweep_outcomes.png", "sweep_time_to_goal.png", "sweep_min_cleara
 # --------------------------------------------------------------------------- helpers
 
 
-def _figure(figsize=(8, 5), nrows=1, ncols=1, **kw):
+def new_figure(figsize=(8, 5), nrows=1, ncols=1, **kw):
     """A pyplot-free figure (Agg canvas) and its axes."""
     try:
         from matplotlib.figure import Figure
@@ -158,7 +158,7 @@ def plot_topdown(log, out_png, *, mark_every: float = 2.0) -> Path:
     L, W = float(co.get("length", 0.0)), float(co.get("width", 0.0))
     figw = 11.0
     figh = float(np.clip(figw * (W + 1.0) / max(L + 1.0, 1.0) + 1.6, 3.5, 9.0)) if L > 0 else 6.0
-    fig, ax = _figure((figw, figh))
+    fig, ax = new_figure((figw, figh))
     if L > 0 and W > 0:
         ax.add_patch(Rectangle((0.0, -W / 2), L, W, fill=False, ec="k", lw=1.5, zorder=1))
     for i, o in enumerate(h.get("static", [])):
@@ -224,7 +224,7 @@ def plot_clearance(log, out_png) -> Path:
     h = records[0]
     states = [r for r in records if r["k"] == "s"]
     collisions = [r for r in records if r["k"] == "collision"]
-    fig, ax = _figure((8, 4.5))
+    fig, ax = new_figure((8, 4.5))
     if not states:
         _message(ax, "no state records in the log")
         ax.set_title(f"{_title(h)}: clearance")
@@ -301,12 +301,12 @@ def plot_perception_error(log, out_png, *, match_distance: float = 1.0) -> Path:
     elif not any(np.isfinite(pe).any() for _, pe, _ in matched.values()):
         reason = f"no dynamic tracks matched to a person within {match_distance:g} m"
     if reason is not None:
-        fig, ax = _figure((8, 4))
+        fig, ax = new_figure((8, 4))
         _message(ax, reason)
         ax.set_title(title, fontsize=9)
         return _save(fig, Path(out_png))
     colors = _person_colors(records)
-    fig, ax = _figure((8, 6), 2, 1, sharex=True)
+    fig, ax = new_figure((8, 6), 2, 1, sharex=True)
     for pid in sorted(matched):
         t, pe, ve = matched[pid]
         ok = np.isfinite(pe)
@@ -359,7 +359,7 @@ def plot_runtime_table(rows, out_png, title: str | None = None, paper_label: str
     if any(len(r) not in (3, 4) for r in rows):
         raise ValueError("plot_runtime_table: each row must be (module, median_ms, p95_ms[, paper_ms])")
     n = len(rows)
-    fig, ax = _figure((8, max(2.2, 0.45 * n + 1.4)))
+    fig, ax = new_figure((8, max(2.2, 0.45 * n + 1.4)))
     if n == 0:
         _message(ax, "no runtime rows")
         ax.set_title(title or "runtime per call", fontsize=9)
@@ -456,7 +456,7 @@ def plot_sweep(results, out_dir) -> list[Path]:
     paths = []
 
     # Outcomes: counts, the Wilson interval drawn in counts.
-    fig, ax = _figure((7, 4.5))
+    fig, ax = new_figure((7, 4.5))
     n = agg["episodes"]
     keys = list(agg["rates"])
     counts = [agg["rates"][k]["count"] for k in keys]
@@ -488,7 +488,7 @@ def plot_sweep(results, out_dir) -> list[Path]:
     # Time to goal of the episodes that reached it.
     ttg = np.array([s["time_to_goal"] for s in summaries if s.get("reached_goal") and s["time_to_goal"] is not None],
                    dtype=float)
-    fig, ax = _figure((7, 4.5))
+    fig, ax = new_figure((7, 4.5))
     if len(ttg):
         ax.hist(ttg, bins=min(30, max(5, int(np.sqrt(len(ttg))) * 2)), color="tab:blue", alpha=0.8, ec="k", lw=0.5)
         d = agg["time_to_goal"]
@@ -507,7 +507,7 @@ def plot_sweep(results, out_dir) -> list[Path]:
                     if s["min_clearance"].get("person") is not None], dtype=float)
     mco = np.array([s["min_clearance"].get("overall") for s in summaries
                     if s["min_clearance"].get("overall") is not None], dtype=float)
-    fig, ax = _figure((7, 4.5))
+    fig, ax = new_figure((7, 4.5))
     both = np.concatenate([mcp, mco])
     if len(both):
         lo_e, hi_e = float(min(both.min(), 0.0)), float(both.max())
@@ -529,7 +529,7 @@ def plot_sweep(results, out_dir) -> list[Path]:
     rows = agg["per_seed"]
     seeds = np.array([r["seed"] for r in rows])
     outc = [_outcome(r) for r in rows]
-    fig, ax = _figure((max(7.0, min(16.0, 0.08 * len(rows) + 5)), 4.5), 2, 1, sharex=True,
+    fig, ax = new_figure((max(7.0, min(16.0, 0.08 * len(rows) + 5)), 4.5), 2, 1, sharex=True,
                       gridspec_kw={"height_ratios": [1, 3]})
     pos = np.arange(len(rows))
     for k in ("success", "collision", "timeout", "other"):

@@ -71,17 +71,17 @@ class YoloMAD:
 
         self.cfg = cfg
         self.detector = detector or PersonDetector2D(cfg.model or None, cfg.score_threshold, cfg.nms_iou, cfg.threads)
-        self.last_boxes_2d = np.zeros((0, 4), np.float32)
-        self.last_scores = np.zeros(0, np.float32)
-        self.last_3d: list[Detection] = []
-        self.last_timings_ms = {"inference": 0.0, "lifting": 0.0}
         self.frames_without_color = 0
+        self._keep(np.zeros((0, 4), np.float32), np.zeros(0, np.float32), [], 0.0, 0.0)
+
+    def _keep(self, boxes_2d, scores, learned: list[Detection], inference_ms: float, lifting_ms: float) -> None:
+        self.last_boxes_2d, self.last_scores, self.last_3d = boxes_2d, scores, learned
+        self.last_timings_ms = {"inference": inference_ms, "lifting": lifting_ms}
 
     def __call__(self, frame, depth_m: np.ndarray, fused: list[Detection]) -> list[Detection]:
         if frame.color is None:  # a depth-only frame: the module has nothing to look at
             self.frames_without_color += 1
-            self.last_boxes_2d, self.last_scores, self.last_3d = np.zeros((0, 4), np.float32), np.zeros(0), []
-            self.last_timings_ms = {"inference": 0.0, "lifting": 0.0}
+            self._keep(np.zeros((0, 4), np.float32), np.zeros(0, np.float32), [], 0.0, 0.0)
             return list(fused)
         t0 = time.perf_counter()
         boxes, scores = self.detector(frame.color)
@@ -91,6 +91,5 @@ class YoloMAD:
         learned = [d for d in lifted if d is not None]
         out = fuse_learned(fused, learned, T[:3, 3], self.cfg)
         t2 = time.perf_counter()
-        self.last_boxes_2d, self.last_scores, self.last_3d = boxes, scores, learned
-        self.last_timings_ms = {"inference": (t1 - t0) * 1e3, "lifting": (t2 - t1) * 1e3}
+        self._keep(boxes, scores, learned, (t1 - t0) * 1e3, (t2 - t1) * 1e3)
         return out

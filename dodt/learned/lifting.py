@@ -83,10 +83,9 @@ def lift_box(depth_m: np.ndarray, box_px, K: CameraIntrinsics, T_world_camera: n
     mid = med + cfg.center_behind_median
     half = max(d_max - d_min, cfg.min_thickness) / 2
     x1, y1, x2, y2 = (float(v) for v in box_px)
-    # Optical frame: x right, y down, z forward; sides at the median depth, depth d_min..d_max.
-    xs = ((x1 - K.cx) * med / K.fx, (x2 - K.cx) * med / K.fx)
-    ys = ((y1 - K.cy) * med / K.fy, (y2 - K.cy) * med / K.fy)
-    corners = np.array([[x, y, z] for x in xs for y in ys for z in (mid - half, mid + half)])
+    # Optical frame (x right, y down, z forward): the sides are the 2D corners at the median depth.
+    (xa, ya, _), (xb, yb, _) = K.backproject(np.array([x1, x2]), np.array([y1, y2]), np.array([med, med]))
+    corners = np.array([[x, y, z] for x in (xa, xb) for y in (ya, yb) for z in (mid - half, mid + half)])
     T = np.asarray(T_world_camera, dtype=np.float64)
     world = corners @ T[:3, :3].T + T[:3, 3]
     lo, hi = size_sanity(world.min(axis=0), world.max(axis=0), cfg)

@@ -51,25 +51,29 @@ def load_record(model_path: Path) -> dict:
     return record
 
 
+def open_session(model_path: Path, threads: int = 1):
+    """An onnxruntime CPU session on the model file, sequential, with ``threads`` intra-op threads."""
+    import onnxruntime as ort
+
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = max(1, int(threads))
+    opts.inter_op_num_threads = 1
+    opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    opts.log_severity_level = 3
+    try:
+        return ort.InferenceSession(str(model_path), sess_options=opts, providers=["CPUExecutionProvider"])
+    except Exception as e:  # onnxruntime raises its own exception types for unreadable graphs
+        raise ModelError(f"{model_path}: onnxruntime cannot load it ({e})") from None
+
+
 class PersonDetector2D:
     """People in a color image: boxes (K, 4) as (x1, y1, x2, y2) pixels of that image, and scores."""
 
     def __init__(self, model_path: str | Path | None = None, score_threshold: float | None = None,
                  nms_iou: float = 0.45, threads: int = 1):
-        import onnxruntime as ort
-
         self.model_path = Path(model_path) if model_path else SHIPPED_MODEL
         self.record = load_record(self.model_path)
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = max(1, int(threads))
-        opts.inter_op_num_threads = 1
-        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        opts.log_severity_level = 3
-        try:
-            self.session = ort.InferenceSession(str(self.model_path), sess_options=opts,
-                                                providers=["CPUExecutionProvider"])
-        except Exception as e:  # onnxruntime raises its own exception types for unreadable graphs
-            raise ModelError(f"{self.model_path}: onnxruntime cannot load it ({e})") from None
+        self.session = open_session(self.model_path, threads)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         want_in = [1, 3, layout.INPUT_H, layout.INPUT_W]
         want_out = [1, layout.CHANNELS, layout.GRID_H, layout.GRID_W]

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from dodt.learned import layout
+from dodt.learned.model import open_session
 
 NMS_IOU = 0.45
 DISTANCE_BINS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0)  # m
@@ -220,12 +221,9 @@ def nms_ceiling(gt_boxes: list[np.ndarray], max_distance: float = 10.0, iou: flo
 
 
 def onnx_session(model_path, threads: int = 2):
-    import onnxruntime as ort
-
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = int(threads)
-    so.inter_op_num_threads = 1
-    return ort.InferenceSession(str(model_path), sess_options=so, providers=["CPUExecutionProvider"])
+    """The run time's session (dodt.learned.model.open_session) without the record check: training
+    evaluates its model before writing the record."""
+    return open_session(Path(model_path), threads)
 
 
 def run_onnx(session, images: np.ndarray) -> np.ndarray:
