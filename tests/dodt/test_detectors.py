@@ -1,6 +1,8 @@
 """Detectors on analytic depth images: boxes at known poses are found within 10 cm."""
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from dodt.config import DBSCANConfig, DepthConfig, EnsembleConfig, UDepthConfig, VoxelConfig
 from dodt.dbscan import DBSCANDetector, dbscan_labels
@@ -118,3 +120,94 @@ def test_dbscan_separates_clusters_and_labels_noise():
     assert len(set(labels[:100])) == 1 and len(set(labels[100:200])) == 1
     assert labels[0] != labels[100] and labels[0] >= 0 and labels[100] >= 0
     assert np.all(labels[200:] == -1)
+
+
+# --------------------------------------------------------------------------- DBSCAN vs brute force
+
+
+def _brute_force_dbscan(points, eps, min_points):
+    """DBSCAN from all pairwise distances (O(n^2)), with the kernel's numbering and border rule."""
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    n = len(pts)
+    labels = np.full(n, -1, np.int64)
+    if n == 0:
+        return labels
+    d = pts[:, None, :] - pts[None, :, :]
+    near = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2] <= eps * eps  # the kernel's sum
+    core = near.sum(axis=1) >= min_points  # the point itself included
+    # Components of the core points: spread the lowest index over core-core edges until it settles.
+    edge = near & core[:, None] & core[None, :]
+    comp = np.arange(n)
+    while True:
+        nxt = np.minimum(comp, np.where(edge, comp[None, :], n).min(axis=1))
+        if np.array_equal(nxt, comp):
+            break
+        comp = nxt
+    # comp is the component's first core point, so sorting the roots numbers them in that order
+    labels[core] = np.unique(comp[core], return_inverse=True)[1]
+    # Border point: the cluster of the core neighbour in the lowest cell (x, y, z), then lowest index.
+    cell = ((pts - pts.min(axis=0)) / eps).astype(np.int64)
+    for i in np.flatnonzero(~core):
+        cand = np.flatnonzero(near[i] & core)
+        if len(cand):
+            j = cand[np.lexsort((cand, cell[cand, 2], cell[cand, 1], cell[cand, 0]))[0]]
+            labels[i] = labels[j]
+    return labels
+
+
+@st.composite
+def dbscan_clouds(draw):
+    """A small random cloud (n <= 300, float32 or float64) with eps and min_points."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    n = draw(st.integers(0, 300))
+    kind = draw(st.sampled_from(["uniform", "clustered", "duplicates", "lattice", "sparse"]))
+    if kind == "uniform":
+        pts = rng.uniform(-1.0, 1.0, (n, 3)) * draw(st.sampled_from([0.05, 0.5, 2.0]))
+    elif kind == "clustered":
+        centres = rng.uniform(0.0, 3.0, (draw(st.integers(1, 6)), 3))
+        spread = draw(st.sampled_from([0.03, 0.1, 0.3]))
+        pts = centres[rng.integers(0, len(centres), n)] + rng.normal(0.0, spread, (n, 3))
+    elif kind == "duplicates":  # few distinct points, many times each
+        base = rng.uniform(0.0, 1.0, (max(n // draw(st.integers(1, 30)), 1), 3))
+        pts = base[rng.integers(0, len(base), n)]
+    elif kind == "lattice":  # many distances exactly at eps: the boundary case
+        pts = rng.integers(0, 8, (n, 3)) * 0.1
+    else:  # at least 1 apart: all noise unless eps >= 1 or min_points == 1
+        pts = np.stack(np.unravel_index(rng.choice(1000, n, replace=False), (10, 10, 10)), axis=1) * 1.0
+    eps = draw(st.sampled_from([0.1, 0.2, 0.3, 0.5, 20.0]))  # 20: larger than any cloud's extent
+    pts = pts.astype(draw(st.sampled_from([np.float32, np.float64])))
+    return pts, eps, draw(st.integers(1, 12))
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(dbscan_clouds())
+def test_dbscan_labels_equal_brute_force(cloud):
+    pts, eps, min_points = cloud
+    np.testing.assert_array_equal(dbscan_labels(pts, eps, min_points), _brute_force_dbscan(pts, eps, min_points))
+
+
+@pytest.mark.parametrize("n, min_points, expect", [(0, 8, []), (1, 1, [0]), (1, 2, [-1])])
+def test_dbscan_empty_and_single_point(n, min_points, expect):
+    labels = dbscan_labels(np.zeros((n, 3), np.float32), 0.3, min_points)
+    assert labels.dtype == np.int64 and labels.tolist() == expect
+
+
+def test_dbscan_all_noise_duplicates_and_large_eps():
+    far = np.arange(30.0)[:, None] * np.array([1.0, 0.5, 0.0])  # 1.1 m apart
+    assert np.all(dbscan_labels(far, 0.3, 2) == -1)
+    assert np.all(dbscan_labels(np.ones((8, 3)), 0.3, 8) == 0)  # 8 copies of one point: one cluster
+    assert np.all(dbscan_labels(np.ones((7, 3)), 0.3, 8) == -1)
+    rng = np.random.default_rng(1)
+    assert np.all(dbscan_labels(rng.uniform(0, 1, (50, 3)), 5.0, 8) == 0)  # eps beyond the extent
+
+
+def test_dbscan_border_between_two_clusters_joins_the_lower_cell():
+    """A border point next to two clusters joins the one whose core neighbour lies in the lower
+    grid cell (here the left one, cell x = 0), although the right one has the lower index."""
+    right = [2.0, 2.08, 2.09, 2.1]  # cluster 0 (its points come first)
+    left = [0.0, 0.01, 0.02, 0.1]  # cluster 1
+    x = np.array(right + [1.05] + left)  # 1.05 is within eps = 1 of 0.1 and 2.0 only: 3 < min_points
+    pts = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    labels = dbscan_labels(pts, 1.0, 4)
+    assert labels.tolist() == [0, 0, 0, 0, 1, 1, 1, 1, 1]
+    np.testing.assert_array_equal(labels, _brute_force_dbscan(pts, 1.0, 4))
