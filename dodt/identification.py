@@ -40,11 +40,13 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
         return 0, 0, n
     # In view back then, and not at the edge of the depth range, where the filtered cloud thins out.
     seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth - cfg.range_margin, margin_px=cfg.fov_margin_px)
-    dist, idx = cloud_then.query(points_now)
     # A nearest neighbour farther than anything walks in dt is no correspondence: that surface
-    # was not in the cloud back then (occluded, too sparse, out of range).
-    seen &= dist <= cfg.max_point_speed * dt + 0.1
-    v = (points_now - cloud_then.data[idx])[:, :2] / dt
+    # was not in the cloud back then (occluded, too sparse, out of range). The search stops at
+    # that bound (much faster); beyond it the tree answers distance inf and index M.
+    reach = cfg.max_point_speed * dt + 0.1
+    dist, idx = cloud_then.query(points_now, distance_upper_bound=reach * (1 + 1e-9))
+    seen &= dist <= reach
+    v = (points_now - cloud_then.data[np.minimum(idx, cloud_then.n - 1)])[:, :2] / dt
     vb = v_box[:2]
     agree = (v @ vb) > 0 if np.linalg.norm(vb) > 1e-9 else np.ones(n, bool)
     valid = seen & agree

@@ -1,0 +1,101 @@
+"""Dynamic identification (dodt.identification): point voting, the candidate test, consistency."""
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from dodt.config import IdentificationConfig
+from dodt.frames import CameraIntrinsics
+from dodt.identification import decide, is_candidate, vote
+from tests.dodt.synthetic import camera_pose
+
+K = CameraIntrinsics()
+CFG = IdentificationConfig()
+T_CAM = camera_pose(0.0, 0.0, 1.2)  # looking along +x
+
+
+def slab(x0: float, y0: float, n: int = 60, seed: int = 0, width: float = 0.5) -> np.ndarray:
+    """Points of an upright slab facing the camera (default person-sized)."""
+    rng = np.random.default_rng(seed)
+    return np.column_stack([np.full(n, x0) + rng.normal(0, 0.01, n), y0 + rng.uniform(-width / 2, width / 2, n),
+                            rng.uniform(0.3, 1.8, n)])
+
+
+def test_static_points_cast_no_votes_and_are_all_valid():
+    then = slab(3.0, 0.0)
+    now = then + np.random.default_rng(1).normal(0, 0.005, then.shape)  # noise only
+    votes, valid, skipped = vote(now, cKDTree(then), 0.15, np.array([0.0, 0.0, 0.0]), T_CAM, K, 5.0, CFG)
+    assert (votes, valid, skipped) == (0, len(now), 0)
+
+
+def test_moving_points_vote_dynamic():
+    then = slab(3.0, 0.0, width=0.1)  # narrower than its displacement: each point's nearest neighbour is its twin
+    dt, v = 0.15, np.array([0.0, 1.2, 0.0])  # walking across the view at 1.2 m/s
+    now = then + v * dt
+    votes, valid, skipped = vote(now, cKDTree(then), dt, v, T_CAM, K, 5.0, CFG)
+    assert valid >= 0.8 * len(now) and votes / valid >= CFG.vote_ratio
+    assert is_candidate(1.2, votes, valid, skipped, CFG)
+
+
+def test_points_out_of_view_back_then_are_skipped_not_voted():
+    then = slab(3.0, 0.0)
+    now = slab(3.0, 0.0, seed=3) + [0.0, 0.3, 0.0]
+    T_away = camera_pose(0.0, 0.0, 1.2, yaw=np.pi)  # back then the camera looked the other way
+    votes, valid, skipped = vote(now, cKDTree(then), 0.15, np.array([0.0, 2.0, 0.0]), T_away, K, 5.0, CFG)
+    assert (votes, valid, skipped) == (0, 0, len(now))
+
+
+def test_nearest_neighbour_beyond_walking_reach_is_no_correspondence():
+    then = slab(3.0, 0.0)
+    dt = 0.15
+    reach = CFG.max_point_speed * dt + 0.1
+    near = slab(3.0, 0.0, seed=4) + [0.0, 0.0, 0.0]
+    far = then[:20] + [0.0, 0.3 + reach, 0.0]  # these have no point within reach back then
+    votes, valid, skipped = vote(np.vstack([near, far]), cKDTree(then), dt, np.array([0.0, 1.0, 0.0]), T_CAM, K,
+                                 5.0, CFG)
+    assert skipped >= len(far)
+    # ... and an array in place of the tree gives the same answer
+    assert vote(np.vstack([near, far]), then, dt, np.array([0.0, 1.0, 0.0]), T_CAM, K, 5.0, CFG) == \
+        (votes, valid, skipped)
+
+
+def test_points_moving_against_the_box_are_invalid():
+    then = slab(3.0, 0.0, width=0.1)
+    dt = 0.15
+    now = then + np.array([0.0, -1.0, 0.0]) * dt
+    votes, valid, skipped = vote(now, cKDTree(then), dt, np.array([0.0, 1.0, 0.0]), T_CAM, K, 5.0, CFG)
+    assert valid == 0 and skipped == len(now)
+
+
+def test_empty_inputs_vote_nothing():
+    then = slab(3.0, 0.0)
+    assert vote(np.zeros((0, 3)), cKDTree(then), 0.1, np.zeros(3), T_CAM, K, 5.0, CFG) == (0, 0, 0)
+    assert vote(then, np.zeros((0, 3)), 0.1, np.zeros(3), T_CAM, K, 5.0, CFG) == (0, 0, len(then))
+    assert vote(then, cKDTree(then), 0.0, np.zeros(3), T_CAM, K, 5.0, CFG) == (0, 0, len(then))
+
+
+@pytest.mark.parametrize("speed,votes,valid,skipped,expected", [
+    (0.1, 10, 10, 0, False),   # below T_vel
+    (0.5, 9, 10, 0, True),     # 90 % of valid points vote
+    (0.5, 7, 10, 0, False),    # 70 % < T_ratio
+    (0.5, 9, 10, 6, False),    # too many points left out of the vote
+    (0.5, 0, 0, 10, False),    # nothing valid
+])
+def test_candidate_rule(speed, votes, valid, skipped, expected):
+    assert is_candidate(speed, votes, valid, skipped, CFG) is expected
+
+
+def test_velocity_method_needs_speed_only():
+    cfg = IdentificationConfig(method="velocity")
+    assert is_candidate(0.5, 0, 0, 10, cfg) and not is_candidate(0.1, 0, 0, 0, cfg)
+
+
+def test_consistency_and_hysteresis():
+    n = CFG.consistency
+    assert not decide([True] * (n - 1), [], CFG)
+    assert decide([False] + [True] * n, [], CFG)
+    # once dynamic for long enough, a few non-candidate frames keep it dynamic ...
+    history = [True] * CFG.force_dynamic_window
+    assert decide([True] * 20 + [False] * 3, history, CFG)
+    # ... but not when it was dynamic in fewer than force_dynamic_count of the window
+    history = [False] * (CFG.force_dynamic_window - CFG.force_dynamic_count + 1) + [True] * (CFG.force_dynamic_count - 1)
+    assert not decide([False], history, CFG)
