@@ -61,6 +61,14 @@ class DBSCANConfig:
     eps: float = 0.3  # m, true distance
     min_points: int = 8  # ref dbscan_min_points_cluster is 10 (with its 15-point voxels); ours 8
     min_size_xy: float = 0.1  # m, boxes are at least this wide, ref
+    # ours: a cluster wider than split_width (m, horizontally) is cut where its points, counted in
+    # split_bin-wide slices along its long horizontal axis, fall to a valley of at most
+    # split_valley_ratio of the peaks on both sides: two people walking side by side, linked by
+    # an arm within eps, are two obstacles (0 turns it off)
+    split_width: float = 0.9
+    split_bin: float = 0.1  # m
+    split_valley_ratio: float = 0.3
+    split_min_part: float = 0.2  # m, each part at least this long along the axis
 
 
 @dataclass(frozen=True)

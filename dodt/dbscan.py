@@ -181,6 +181,62 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
     return _dbscan_kernel(pts, float(eps), int(min_points))
 
 
+def split_at_valleys(points: np.ndarray, cfg: DBSCANConfig, depth: int = 0) -> list[np.ndarray]:
+    """Index arrays of the parts of one cluster, cut at sparse slices (see DBSCANConfig.split_width).
+
+    The long axis is the principal axis of the horizontal coordinates. Slices of ``split_bin``
+    along it are counted; a slice is a valley when its count is at most ``split_valley_ratio``
+    of the highest slice on each side of it, and each side is at least ``split_min_part`` long and
+    has ``min_points`` points. The cluster is cut at its deepest valley, and each part again; the
+    valley's own points belong to neither part.
+    """
+    idx = np.arange(len(points))
+    xy = points[:, :2].astype(np.float64)
+    ext = xy.max(axis=0) - xy.min(axis=0) if len(xy) else np.zeros(2)
+    if cfg.split_width <= 0 or len(points) < 2 * cfg.min_points or np.hypot(*ext) <= cfg.split_width or depth > 4:
+        return [idx]
+    c = xy - xy.mean(axis=0)
+    w, vecs = np.linalg.eigh(c.T @ c)
+    s = c @ vecs[:, 1]  # along the long axis
+    if s.max() - s.min() <= cfg.split_width:
+        return [idx]
+    # Each point counts for the two nearest slice centres in proportion to its nearness (linear
+    # binning): voxel centroids lie near a 0.1 m lattice, and hard slices of the same width would
+    # count 0, 2, 0, 2 ... rows along an axis-aligned obstacle.
+    t = (s - s.min()) / cfg.split_bin
+    k0 = np.floor(t).astype(np.int64)
+    f = t - k0
+    n_bins = int(k0.max()) + 2
+    counts = np.bincount(k0, 1 - f, minlength=n_bins) + np.bincount(k0 + 1, f, minlength=n_bins)
+    left_peak = np.maximum.accumulate(counts)
+    right_peak = np.maximum.accumulate(counts[::-1])[::-1]
+    left_n = np.cumsum(counts)  # points up to each slice centre, about
+    min_bins = int(np.ceil(cfg.split_min_part / cfg.split_bin))
+    best, best_ratio = -1, cfg.split_valley_ratio
+    for k in range(min_bins, n_bins - min_bins):
+        peak = min(left_peak[k - 1], right_peak[k + 1])
+        if peak <= 0 or left_n[k - 1] < cfg.min_points or len(s) - left_n[k] < cfg.min_points:
+            continue
+        ratio = counts[k] / peak
+        if ratio <= best_ratio and (best < 0 or ratio < best_ratio):
+            best, best_ratio = k, ratio
+    if best < 0:
+        return [idx]
+    # The valley is the run of slices around the deepest one that stay below the ratio; its points
+    # (an arm or a thin link between the two) go to neither part, so the boxes do not reach across.
+    peak = min(left_peak[best - 1], right_peak[best + 1])
+    lo = hi = best
+    while lo - 1 >= 0 and counts[lo - 1] <= cfg.split_valley_ratio * peak:
+        lo -= 1
+    while hi + 1 < n_bins and counts[hi + 1] <= cfg.split_valley_ratio * peak:
+        hi += 1
+    parts = []
+    for side in (t < lo - 0.5, t >= hi + 0.5):
+        sub = idx[side]
+        parts += [sub[p] for p in split_at_valleys(points[sub], cfg, depth + 1)]
+    return parts
+
+
 class DBSCANDetector:
     def __init__(self, cfg: DBSCANConfig):
         self.cfg = cfg
@@ -197,10 +253,12 @@ class DBSCANDetector:
         for s, e in zip(starts, ends):
             if e <= s or sl[s] < 0:
                 continue
-            pts = points[order[s:e]]
-            lo, hi = pts.min(axis=0).astype(float), pts.max(axis=0).astype(float)
-            grow = np.maximum(self.cfg.min_size_xy - (hi - lo)[:2], 0.0) / 2
-            lo[:2] -= grow
-            hi[:2] += grow
-            dets.append(Detection.from_bounds(lo, hi, "dbscan", pts))
+            cluster = points[order[s:e]]
+            for part in split_at_valleys(cluster, self.cfg):
+                pts = cluster[part]
+                lo, hi = pts.min(axis=0).astype(float), pts.max(axis=0).astype(float)
+                grow = np.maximum(self.cfg.min_size_xy - (hi - lo)[:2], 0.0) / 2
+                lo[:2] -= grow
+                hi[:2] += grow
+                dets.append(Detection.from_bounds(lo, hi, "dbscan", pts))
         return dets

@@ -211,3 +211,44 @@ def test_dbscan_border_between_two_clusters_joins_the_lower_cell():
     labels = dbscan_labels(pts, 1.0, 4)
     assert labels.tolist() == [0, 0, 0, 0, 1, 1, 1, 1, 1]
     np.testing.assert_array_equal(labels, _brute_force_dbscan(pts, 1.0, 4))
+
+
+def _column(cx, cy, rng, width=0.4, depth=0.25, step=0.1):
+    """Voxel-like points filling an upright person-sized column (0.3-1.8 m high)."""
+    g = np.mgrid[-width / 2:width / 2 + 1e-9:step, -depth / 2:depth / 2 + 1e-9:step, 0.3:1.8 + 1e-9:step]
+    p = g.reshape(3, -1).T + [cx, cy, 0.0]
+    return p + rng.normal(0, 0.01, p.shape)
+
+
+def _rot(points, yaw, about):
+    c, s = np.cos(yaw), np.sin(yaw)
+    q = points - about
+    return np.column_stack([c * q[:, 0] - s * q[:, 1], s * q[:, 0] + c * q[:, 1], q[:, 2]]) + about
+
+
+@pytest.mark.parametrize("yaw", [0.0, np.pi / 4, np.pi / 2])
+def test_dbscan_splits_two_people_linked_by_an_arm(yaw):
+    rng = np.random.default_rng(0)
+    a, b = np.array([4.0, -0.35, 0.0]), np.array([4.0, 0.35, 0.0])  # 0.7 m apart, side by side
+    arm = np.column_stack([np.full(3, 4.0), [-0.1, 0.0, 0.1], np.full(3, 1.2)])  # bridges the 0.3 m gap
+    pts = np.vstack([_column(*a[:2], rng), _column(*b[:2], rng), arm])
+    about = (a + b) / 2
+    pts = _rot(pts, yaw, about)
+    assert dbscan_labels(pts, 0.3, 8).max() == 0  # one DBSCAN cluster ...
+    dets = DBSCANDetector(DBSCANConfig())(pts.astype(np.float32))
+    assert len(dets) == 2  # ... cut into two obstacles
+    truth = _rot(np.array([a, b]), yaw, about)[:, :2]
+    found = [d.center[:2] for d in dets]
+    for t in truth:
+        assert min(np.linalg.norm(f - t) for f in found) < 0.1
+    assert len(DBSCANDetector(DBSCANConfig(split_width=0.0))(pts.astype(np.float32))) == 1  # off
+
+
+def test_dbscan_does_not_split_an_even_wall_or_a_single_person():
+    rng = np.random.default_rng(1)
+    g = np.mgrid[3.0:3.01:0.1, -1.5:1.5 + 1e-9:0.1, 0.3:2.0 + 1e-9:0.1]
+    wall = g.reshape(3, -1).T + rng.normal(0, 0.01, (g[0].size, 3))
+    dets = DBSCANDetector(DBSCANConfig())(wall.astype(np.float32))
+    assert len(dets) == 1 and dets[0].size[1] > 2.9
+    person = _column(4.0, 0.0, rng, width=0.6)
+    assert len(DBSCANDetector(DBSCANConfig())(person.astype(np.float32))) == 1
