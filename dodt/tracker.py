@@ -32,10 +32,11 @@ class _Observation:
 
 
 def _anchor(det: Detection, source: str) -> np.ndarray:
-    """The horizontal point the filter measures: the box centre, or the median of the
+    """The horizontal point the filter measures: the box centre, or the mean or median of the
     obstacle's points (steadier: swinging limbs move the box more than the body)."""
-    if source == "points" and len(det.points) >= 10:
-        return np.median(det.points[:, :2], axis=0).astype(float)
+    if source in ("mean", "median") and len(det.points) >= 10:
+        xy = det.points[:, :2]
+        return (np.mean(xy, axis=0) if source == "mean" else np.median(xy, axis=0)).astype(float)
     return det.center[:2].astype(float)
 
 
