@@ -72,9 +72,13 @@ def size_ok(size: np.ndarray, cfg: IdentificationConfig) -> bool:
 
 
 def decide(candidates: list[bool], dynamic_history: list[bool], cfg: IdentificationConfig) -> bool:
-    """Consistency over frames, with the reference code's hysteresis."""
+    """Consistency over frames, with the reference code's hysteresis, and ours: a dynamic track
+    turns static only after ``release_frames`` frames in a row that were no candidates."""
     n = cfg.consistency
     if len(candidates) >= n and all(candidates[-n:]):
+        return True
+    r = cfg.release_frames
+    if r > 0 and dynamic_history and dynamic_history[-1] and any(candidates[-r:]):
         return True
     window = dynamic_history[-cfg.force_dynamic_window:]
     return len(dynamic_history) >= cfg.force_dynamic_window and sum(window) >= cfg.force_dynamic_count
