@@ -99,3 +99,19 @@ def test_consistency_and_hysteresis():
     # ... but not when it was dynamic in fewer than force_dynamic_count of the window
     history = [False] * (CFG.force_dynamic_window - CFG.force_dynamic_count + 1) + [True] * (CFG.force_dynamic_count - 1)
     assert not decide([False], history, CFG)
+
+
+def test_a_young_dynamic_track_is_released_only_after_release_frames_non_candidates():
+    n, r = CFG.consistency, CFG.release_frames
+    assert r > 0
+    cand = [True] * n
+    history = [False] * (n - 1) + [True]  # dynamic since the last frame, far younger than the window
+    # one, or r - 1, frames that are no candidates keep it dynamic ...
+    assert decide(cand + [False], history, CFG)
+    assert decide(cand + [False] * (r - 1), history + [True] * (r - 2), CFG)
+    # ... r in a row release it, and a track that was static is not held dynamic by the rule
+    assert not decide(cand + [False] * r, history + [True] * (r - 1), CFG)
+    assert not decide(cand[:-1] + [False], [False] * n, CFG)
+    # release_frames = 0 is the reference code's rule: released at the first non-candidate frame
+    ref = IdentificationConfig(release_frames=0)
+    assert not decide(cand + [False], history, ref)
