@@ -56,10 +56,16 @@ class PseudoMeasurements:
         return np.concatenate([p, v, a])
 
 
-def run_filter(model: str, seed: int, noise: float = NOISE):
+# The reference code's noise values; our defaults trust the velocity pseudo-measurement more
+# (p0 4, r_vel 0.1: a new track's speed passes T_vel sooner), which on this synthetic target
+# raises the steady-state velocity error (CA, seeds 0-4: 0.116 -> 0.131 m/s RMS).
+REF_NOISE = dict(p0=0.25, r_vel=0.3)
+
+
+def run_filter(model: str, seed: int, noise: float = NOISE, **cfg_overrides):
     """Filter the trajectory at 30 Hz for 6 s; per-frame position / velocity errors and the
     raw measurement error, plus the filters' states."""
-    cfg = KalmanConfig(model=model)
+    cfg = KalmanConfig(model=model, **(REF_NOISE | cfg_overrides))
     rng = np.random.default_rng(seed)
     times = np.arange(0.0, DURATION + 1e-9, 1.0 / FPS)
     meas = PseudoMeasurements(cfg.averaging_frames)
@@ -161,7 +167,7 @@ def test_cv_filter_ignores_the_acceleration_measurement():
 
 @pytest.mark.parametrize("model", ["ca", "cv"])
 def test_predict_grows_and_update_shrinks_the_covariance(model):
-    kf = KalmanFilter(KalmanConfig(model=model), np.zeros(2))
+    kf = KalmanFilter(KalmanConfig(model=model, **REF_NOISE), np.zeros(2))
     rng = np.random.default_rng(3)
     for _ in range(50):
         P0 = kf.P.copy()
@@ -265,6 +271,10 @@ def test_ca_beats_cv_on_velocity_for_an_accelerating_target(runs):
     rms = {m: np.array([np.sqrt(np.mean(r[1][after] ** 2)) for r in runs[m]]) for m in runs}
     assert rms["ca"].mean() < 0.95 * rms["cv"].mean()
     assert np.all(rms["ca"] < rms["cv"])
+    # with our default noise values the margin shrinks (measured 0.131 vs 0.135) but CA stays ahead
+    d = {m: np.array([np.sqrt(np.mean(run_filter(m, s, p0=KalmanConfig().p0, r_vel=KalmanConfig().r_vel)[1][after] ** 2))
+                      for s in SEEDS]) for m in ("ca", "cv")}
+    assert np.all(d["ca"] < d["cv"])
 
 
 def test_ca_beats_cv_without_noise():
