@@ -212,16 +212,15 @@ def split_at_valleys(points: np.ndarray, cfg: DBSCANConfig, depth: int = 0) -> l
     right_peak = np.maximum.accumulate(counts[::-1])[::-1]
     left_n = np.cumsum(counts)  # points up to each slice centre, about
     min_bins = int(np.ceil(cfg.split_min_part / cfg.split_bin))
-    best, best_ratio = -1, cfg.split_valley_ratio
-    for k in range(min_bins, n_bins - min_bins):
-        peak = min(left_peak[k - 1], right_peak[k + 1])
-        if peak <= 0 or left_n[k - 1] < cfg.min_points or len(s) - left_n[k] < cfg.min_points:
-            continue
-        ratio = counts[k] / peak
-        if ratio <= best_ratio and (best < 0 or ratio < best_ratio):
-            best, best_ratio = k, ratio
-    if best < 0:
+    k = np.arange(min_bins, n_bins - min_bins)
+    if k.size == 0:
         return [idx]
+    peak = np.minimum(left_peak[k - 1], right_peak[k + 1])
+    ok = (peak > 0) & (left_n[k - 1] >= cfg.min_points) & (len(s) - left_n[k] >= cfg.min_points)
+    ratio = np.where(ok, counts[k] / np.where(peak > 0, peak, 1.0), np.inf)
+    if ratio.min() > cfg.split_valley_ratio:
+        return [idx]
+    best = int(k[np.argmin(ratio)])  # the deepest valley, the first of equals
     # The valley is the run of slices around the deepest one that stay below the ratio; its points
     # (an arm or a thin link between the two) go to neither part, so the boxes do not reach across.
     peak = min(left_peak[best - 1], right_peak[best + 1])
