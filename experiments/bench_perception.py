@@ -78,7 +78,9 @@ def _fmt(x, nd=3):
     return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:.{nd}f}"
 
 
-def write_tables(out: Path, overall: dict, per_scn: dict) -> str:
+def write_tables(out: Path, overall: dict, per_scn: dict, per_seed: dict | None = None) -> str:
+    """table.md / table.csv; ``per_seed`` ({seed: {config: summary}}, two seeds or more) adds the
+    overall figures of each seed, so that the spread between draws is in the table too."""
     rows = []
     for cfg, s in overall.items():
         paper = PAPER_TABLE_I.get(cfg, (None, None, None, None))
@@ -111,6 +113,13 @@ def write_tables(out: Path, overall: dict, per_scn: dict) -> str:
             cells.append(f"{_fmt(s['pos_err'], 2)} / {_fmt(s['vel_err'], 2)} / {_fmt(100 * s['fp_rate'], 1)} / "
                          f"{_fmt(100 * s['recall'], 0)} / {s['id_switches']}")
         lines.append(f"| {cfg} | " + " | ".join(cells) + " |")
+    if per_seed and len(per_seed) > 1:
+        lines += ["", "Per seed, all scenarios (pos. err. m / vel. err. m/s / FP % / recall %):", "",
+                  "| Method | " + " | ".join(f"seed {k}" for k in per_seed) + " |", "|---|" + "---|" * len(per_seed)]
+        for cfg in overall:
+            cells = [f"{_fmt(d[cfg]['pos_err'])} / {_fmt(d[cfg]['vel_err'])} / {_fmt(100 * d[cfg]['fp_rate'], 1)} / "
+                     f"{_fmt(100 * d[cfg]['recall'], 1)}" for d in per_seed.values()]
+            lines.append(f"| {cfg} | " + " | ".join(cells) + " |")
     text = "\n".join(lines) + "\n"
     (out / "table.md").write_text(text)
     return text
@@ -202,9 +211,11 @@ def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration
             print(f"  {scn} seed {seed}: dodt {m['dodt'].summary() if 'dodt' in m else ''}"[:160], flush=True)
     per_scn = {s: {c: PerceptionMetrics.combine(v) for c, v in d.items()} for s, d in per_scn_metrics.items()}
     overall = {c: PerceptionMetrics.combine([m for s in scenarios for m in per_scn_metrics[s][c]]) for c in configs}
-    text = write_tables(out, overall, per_scn) + "\n" + write_recall_by_distance(out, overall)
+    per_seed = {seed: {c: PerceptionMetrics.combine([per_scn_metrics[s][c][i] for s in scenarios]) for c in configs}
+                for i, seed in enumerate(seeds)}
+    text = write_tables(out, overall, per_scn, per_seed) + "\n" + write_recall_by_distance(out, overall)
     (out / "results.json").write_text(json.dumps({"seeds": seeds, "scenarios": list(scenarios), "overall": overall,
-                                                  "per_scenario": per_scn}, indent=1))
+                                                  "per_scenario": per_scn, "per_seed": per_seed}, indent=1))
     print(text)
     print(f"wrote {out}/table.md, table.csv, recall_by_distance.md/.csv, results.json and plots in "
           f"{time.perf_counter() - t0:.0f} s")
