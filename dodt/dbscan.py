@@ -196,8 +196,7 @@ def split_at_valleys(points: np.ndarray, cfg: DBSCANConfig, depth: int = 0) -> l
     if cfg.split_width <= 0 or len(points) < 2 * cfg.min_points or np.hypot(*ext) <= cfg.split_width or depth > 4:
         return [idx]
     c = xy - xy.mean(axis=0)
-    w, vecs = np.linalg.eigh(c.T @ c)
-    s = c @ vecs[:, 1]  # along the long axis
+    s = c @ np.linalg.eigh(c.T @ c)[1][:, 1]  # along the long axis (the larger eigenvalue's vector)
     if s.max() - s.min() <= cfg.split_width:
         return [idx]
     # Each point counts for the two nearest slice centres in proportion to its nearness (linear
@@ -220,14 +219,14 @@ def split_at_valleys(points: np.ndarray, cfg: DBSCANConfig, depth: int = 0) -> l
     ratio = np.where(ok, counts[k] / np.where(peak > 0, peak, 1.0), np.inf)
     if ratio.min() > cfg.split_valley_ratio:
         return [idx]
-    best = int(k[np.argmin(ratio)])  # the deepest valley, the first of equals
+    j = int(np.argmin(ratio))  # the deepest valley, the first of equals
+    best, floor = int(k[j]), cfg.split_valley_ratio * peak[j]
     # The valley is the run of slices around the deepest one that stay below the ratio; its points
     # (an arm or a thin link between the two) go to neither part, so the boxes do not reach across.
-    peak = min(left_peak[best - 1], right_peak[best + 1])
     lo = hi = best
-    while lo - 1 >= 0 and counts[lo - 1] <= cfg.split_valley_ratio * peak:
+    while lo - 1 >= 0 and counts[lo - 1] <= floor:
         lo -= 1
-    while hi + 1 < n_bins and counts[hi + 1] <= cfg.split_valley_ratio * peak:
+    while hi + 1 < n_bins and counts[hi + 1] <= floor:
         hi += 1
     parts = []
     for side in (t < lo - 0.5, t >= hi + 0.5):
