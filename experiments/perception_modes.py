@@ -12,6 +12,9 @@ Modes:
   person is known while inside the camera's horizontal field of view within ``max_range``, and for
   ``memory`` seconds after leaving it (perfect tracking through occlusion), with exact position,
   size and velocity.
+- ``oracle-360``: the same without the field of view: every person within ``max_range`` in any
+  direction. Not a sensor anyone has; it measures the planner alone (with it, collisions are the
+  planner's, since nothing comes from where the camera does not look).
 - ``static-only``: no dynamic perception; people enter the map as static obstacles.
 """
 from __future__ import annotations
@@ -27,7 +30,7 @@ from dodt.pipeline import DODT
 from dodt.presets import PRESETS, preset
 from planner.types import ObstaclePrediction
 
-MODES = ("dodt", "oracle", "static-only")
+MODES = ("dodt", "oracle", "oracle-360", "static-only")
 
 
 def known_modes() -> tuple[str, ...]:
@@ -127,12 +130,13 @@ class DODTPerception:
 
 
 class OraclePerception:
-    name = "oracle"
     uses_ground_truth = True
 
-    def __init__(self, max_range: float = 5.0, memory: float = 1.0):
+    def __init__(self, max_range: float = 5.0, memory: float = 1.0, all_around: bool = False):
         self.max_range = max_range
         self.memory = memory
+        self.all_around = all_around
+        self.name = "oracle-360" if all_around else "oracle"
         self.reset()
 
     def reset(self) -> None:
@@ -149,7 +153,8 @@ class OraclePerception:
             # Seen when any part of the body is within the horizontal FOV cone and range.
             bearing, dist = bearing_and_distance(cam, heading, o.center)
             widen = math.atan2(0.5 * float(np.hypot(*o.size[:2])), max(dist, 1e-6))
-            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.max_range and bearing <= half_fov + widen:
+            in_view = self.all_around or bearing <= half_fov + widen
+            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.max_range and in_view:
                 self._last_seen[o.id] = truth.stamp
             seen = self._last_seen.get(o.id)
             if seen is None or truth.stamp - seen > self.memory:
@@ -179,6 +184,8 @@ def make_perception(mode: str, learned_detector=None) -> PerceptionModule:
     """A perception module by name: dodt (or any DODT preset), oracle, static-only."""
     if mode == "oracle":
         return OraclePerception()
+    if mode == "oracle-360":
+        return OraclePerception(all_around=True)
     if mode == "static-only":
         return StaticOnlyPerception()
     if mode in PRESETS:

@@ -292,7 +292,7 @@ def plot_perception_error(log, out_png, *, match_distance: float = 1.0) -> Path:
     matched = match_tracks_to_people(records, match_distance)
     any_dyn = any(t.get("dynamic") for r in records if r["k"] == "f" for t in r.get("tracks", []))
     reason = None
-    if mode == "oracle":
+    if mode in ("oracle", "oracle-360"):
         reason = f"no dynamic tracks to score: perception '{mode}' reports the ground truth"
     elif mode == "static-only":
         reason = f"no dynamic tracks: perception '{mode}' reports none"
