@@ -15,6 +15,9 @@ static slack per step, both >= 0 and in metres.
         c~ = o + (c - o)/sqrt(f(c)), the radial projection onto the surface of the previous plan's
         point c_k: n.p_k + sd_k >= n.c~, n = grad f(c~)/|grad f(c~)|. This equals linearising at c_k
         when c_k is on the surface and is never more conservative elsewhere ((1 + f)/2 >= sqrt f).
+        Where c_k lies within side_bias of the obstacle's line of relative motion, it is first moved
+        side_bias off that line, toward the obstacle's back: near head-on, from behind or crossing, the
+        plane then asks the drone to step aside or pass behind rather than to outrun the obstacle.
     (5) Occupied voxels (centres q): greedy separating planes per step, from c_k:
         n = (c_k - q)/|c_k - q| for the nearest q, n.p_k + ss_k >= n.q + robot_radius + voxel/2 + margin,
         points behind the plane through q are dropped, repeat up to K_s times. Where c_k is closer than
@@ -82,7 +85,13 @@ class MPCConfig:
     static_per_step: int = 4  # K_s separating planes per step; ours
     static_radius: float = 2.5  # m; voxels farther than this from c_k are ignored; ours
     voxel_size: float = 0.1  # m; map resolution (Intent-MPC map res 0.1)
-    side_bias: float = 0.1  # m; near head-on, linearise as if c_k were this far aside: breaks the tie; ours
+    side_bias: float = 0.4  # m; near head-on, linearise as if c_k were this far aside: breaks the tie; ours
+    # (0.1 before relative_side; 0.7 measured: oracle-360 corridor seeds 0-39 75 % against 80 % at 0.4)
+    relative_side: bool = True  # side_bias applies across each obstacle's velocity relative to the planned
+    # motion, not across the direction of travel; ours. A person walking into a waiting drone from behind or
+    # head-on then gets a tangent plane that says "step aside" instead of "outrun it" (which the drone,
+    # blocked or slower, cannot). Measured on corridor seeds 0-39 with side_bias 0.4: oracle-360 success
+    # 67.5 % -> 80 %, dodt 40 % -> 52.5 %
     iterations: int = 1  # linearise-and-solve rounds per call
     warm_start: bool = True  # start OSQP from the previous solution shifted in time (False: from zero)
     rho: float = 0.5  # OSQP initial ADMM step (adaptive after); ours, fewer iterations on bench_mpc than 0.1
@@ -213,30 +222,40 @@ class MPC:
         return MPCResult(tr, tr.status, iters, 0.0, 0.0, ms, ignored)
 
     def _tie_break(self, d, side):
-        """Offsets d (..., 3) from an obstacle to c_k whose component along `side` (left of travel) is
-        below side_bias get it raised to side_bias (on their side, left if 0): a symmetric head-on plan
-        would otherwise only ever brake or push through on slack. Any tangent plane is conservative."""
+        """Offsets d (..., 3) from an obstacle to c_k whose component along `side` is below side_bias get
+        it raised to side_bias (on their side, left if 0): a symmetric head-on plan would otherwise only
+        ever brake or push through on slack. Any tangent plane is conservative. `side`: left of the
+        obstacle's velocity relative to the planned motion (relative_side), else left of travel."""
         lat = np.sum(d * side, axis=-1)
         return d + (np.maximum(self.cfg.side_bias - np.abs(lat), 0.0) * np.where(lat < 0, -1.0, 1.0))[..., None] * side
 
-    def _dynamic_rows(self, c, obstacles, p0, side):
+    def _dynamic_rows(self, c, obstacles, p0, side, v_plan=None):
         """(4): unit normals (N, J, 3) and right-hand sides (N, J) for the nearest obstacles."""
         cfg, N = self.cfg, self.N
         t = cfg.dt * np.arange(1, N + 1)
         cand = []
         for ob in obstacles:
+            sd = side
+            if cfg.relative_side and v_plan is not None:
+                vo = np.asarray(ob.velocity, dtype=float)
+                vr = (vo - v_plan)[:2]
+                if np.hypot(*vr) > 0.2:
+                    sd = np.array([-vr[1], vr[0], 0.0]) / np.hypot(*vr)
+                    lead = float(sd @ vo)  # the tie goes behind the obstacle; left of travel if it is neither
+                    sd = -sd if lead > 0.05 or (lead >= -0.05 and float(sd @ side) < 0) else sd
             o = ob.predict(t)
             half = np.asarray(ob.size, dtype=float) / 2 + cfg.robot_radius + cfg.dynamic_margin
             ax = np.repeat(half[None], N, axis=0)
             ax[:, :2] += cfg.z_std * ob.std_at(t)[:, None]
             dist = float(np.min(np.linalg.norm(c - o, axis=1) - ax.max(axis=1)))  # to the ellipsoid, roughly
             if dist <= cfg.dynamic_range:
-                cand.append((dist, len(cand), o, ax))
+                cand.append((dist, len(cand), o, ax, sd))
         cand = sorted(cand, key=lambda e: e[:2])[:cfg.max_dynamic]
         if not cand:
             return np.zeros((N, 0, 3)), np.zeros((N, 0))
         o = np.stack([e[2] for e in cand], axis=1)  # (N, J, 3)
         ax = np.stack([e[3] for e in cand], axis=1)
+        side = np.stack([e[4] for e in cand])  # (J, 3)
         # an ellipsoid spanning the whole altitude band (a person) is treated as its elliptic cylinder:
         # horizontal normals, so the plan goes around it rather than climbing along its shoulder
         tall = ((o[..., 2] - ax[..., 2] <= cfg.z_min) & (o[..., 2] + ax[..., 2] >= cfg.z_max))[..., None]
@@ -409,7 +428,7 @@ class MPC:
         l[rz], u[rz] = np.minimum(cfg.z_min + cfg.backoff, zb), np.maximum(cfg.z_max - cfg.backoff, zb)
         iters = 0
         for _ in range(max(1, cfg.iterations)):
-            nd, bd = self._dynamic_rows(c, obs, p0, side)
+            nd, bd = self._dynamic_rows(c, obs, p0, side, (p_ref[-1] - p0) / (N * dt))
             ns, bs = self._static_rows(c, pts, side, p0)
             nd[~np.isfinite(bd)], bd[~np.isfinite(bd)] = 0.0, -np.inf  # overflow from absurd inputs: row unused
             ns[~np.isfinite(bs)], bs[~np.isfinite(bs)] = 0.0, -np.inf

@@ -27,7 +27,7 @@ def person(i, c0, vel, t):
     return ObstaclePrediction(id=i, center=c0 + vel * t, size=PERSON, velocity=vel)
 
 
-def closed_loop(mpc, p, goal, people=(), static=None, steps=40):
+def closed_loop(mpc, p, goal, people=(), static=None, steps=40, speed=1.5):
     """Receding horizon: solve, fly the first step exactly, repeat. Returns results and the executed
     path sampled 5 times per step with its times."""
     v, a = np.zeros(3), np.zeros(3)
@@ -35,7 +35,7 @@ def closed_loop(mpc, p, goal, people=(), static=None, steps=40):
     for k in range(steps):
         t = k * DT
         obs = [person(i, c0, vel, t) for i, (c0, vel) in enumerate(people)]
-        p_ref, v_ref = line_ref(p, goal)
+        p_ref, v_ref = line_ref(p, goal, speed)
         r = mpc.solve(t, p, v, a, p_ref, v_ref, obstacles=obs, static_points=static)
         results.append(r)
         tr = r.trajectory
@@ -103,6 +103,27 @@ def test_crossing_person_is_avoided(direction):
     assert all(r.status == "solved" for r in results)
     assert_clear_of_people(samples, times, people)
     assert samples[-1, 0] > 4.5
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_crossing_person_is_passed_behind_not_raced(direction):
+    """relative_side: the tie-break runs across the person's velocity relative to the drone, toward the
+    person's back, so the drone crosses the person's line behind them from either side. The tie to the
+    left of travel does so only for a person coming from the left: one from the right is raced and
+    passed in front of, in their way."""
+    people = [([2.0, -2.0 * direction, 0.9], [0.0, 1.0 * direction, 0.0])]
+
+    def crossing(cfg):
+        _, samples, times = closed_loop(MPC(cfg), np.array([0.0, 0.0, 1.2]), np.array([15.0, 0.0, 1.2]), people,
+                                        steps=60, speed=1.0)
+        i = int(np.argmax(samples[:, 0] >= 2.0))  # first sample on the person's line x = 2
+        assert samples[i, 0] >= 2.0
+        assert_clear_of_people(samples, times, people)
+        return direction * (samples[i, 1] - (-2.0 * direction + direction * times[i]))  # drone's lead over the person
+
+    assert crossing(MPCConfig(relative_side=True)) < -0.5  # behind the person
+    lead = crossing(MPCConfig(relative_side=False))
+    assert lead > 0.5 if direction > 0 else lead < -0.5
 
 
 def wall_with_gap(x=4.0, gap=0.9, res=0.1):
