@@ -150,6 +150,21 @@ def _cmd_replay(args) -> int:
     return 0
 
 
+def _cmd_collisions(args) -> int:
+    from experiments.collision_report import collision_rows, format_table, logs_under
+    from experiments.episode_log import read_log
+
+    rows = []
+    try:
+        for path in args.source:
+            for log in logs_under(Path(path)):
+                rows += collision_rows(read_log(log), window=args.window)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    print(format_table(rows) if rows else "no collisions")
+    return 0
+
+
 def _cmd_plot(args) -> int:
     from experiments.plots import plot_episode, plot_sweep
 
@@ -335,6 +350,12 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("log", help="an episode's log.jsonl.gz")
     rp.add_argument("--out", default=None, help="HTML file (default: replay.html beside the log)")
     rp.set_defaults(func=_cmd_replay)
+
+    co = sub.add_parser("collisions", help="one row per collision of saved episodes: who closed in, was the person "
+                                           "in view, tracked, reported moving")
+    co.add_argument("source", nargs="+", help="episode logs, run folders or sweep folders")
+    co.add_argument("--window", type=float, default=2.0, help="seconds before each collision looked at (default 2)")
+    co.set_defaults(func=_cmd_collisions)
 
     pl = sub.add_parser("plot", help="PNG figures of an episode (run folder or log) or a sweep (sweep folder)")
     pl.add_argument("source", help="an episode folder / log.jsonl.gz, or a sweep folder / results.jsonl")

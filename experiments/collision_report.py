@@ -1,0 +1,86 @@
+"""Why did the drone collide? One row per collision of a saved episode log (experiments.episode_log).
+
+For each collision: the drone's horizontal speed, who closed the gap (the drone's and, for a person,
+the person's velocity along the line between them: positive = moving toward the other), and, over the
+``window`` seconds before it, the fraction of camera frames in which the person was inside the
+camera's horizontal view within ``view_range``, tracked by perception (a reported box centre within
+``match`` metres) and reported as a moving obstacle. A person hit from outside the view was never
+seen coming; one seen and reported moving points at the planner.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from experiments.episode_log import read_log
+
+HALF_FOV = math.radians(43.5)  # the D435's horizontal half field of view at 640x480 (sim/camera)
+
+
+def _centre(person: dict) -> np.ndarray:
+    return (np.asarray(person["lo"], float) + np.asarray(person["hi"], float)) / 2
+
+
+def collision_rows(records: list[dict], window: float = 2.0, view_range: float = 5.0, match: float = 0.5,
+                   half_fov: float = HALF_FOV) -> list[dict]:
+    """The collisions of one episode's records, as dicts (see the module docstring)."""
+    header = records[0]
+    states = [r for r in records if r["k"] == "s"]
+    frames = [r for r in records if r["k"] == "f"]
+    rows = []
+    for c in (r for r in records if r["k"] == "collision"):
+        t = c["t"]
+        s = min(states, key=lambda r: abs(r["t"] - t)) if states else None
+        v = np.asarray(s["v"], float)[:2] if s else np.zeros(2)
+        row = {"seed": header.get("seed"), "t": round(t, 3), "kind": c["kind"], "other_id": c["other_id"],
+               "position": [round(float(x), 2) for x in c["position"]], "drone_speed": round(float(np.hypot(*v)), 2)}
+        if c["kind"] == "person" and frames:
+            seen, tracked, moving = [], [], []
+            for f in (f for f in frames if t - window <= f["t"] <= t):
+                person = next((q for q in f["people"] if q["id"] == c["other_id"]), None)
+                if person is None:
+                    continue
+                centre = _centre(person)[:2]
+                fwd = np.asarray(f["R"], float).reshape(3, 3)[:2, 0]  # body x: the camera's heading
+                d = centre - np.asarray(f["p"], float)[:2]
+                bearing = abs((math.atan2(d[1], d[0]) - math.atan2(fwd[1], fwd[0]) + math.pi) % (2 * math.pi) - math.pi)
+                seen.append(bearing <= half_fov and float(np.hypot(*d)) <= view_range)
+                near = [tr for tr in f["tracks"] if float(np.hypot(*(np.asarray(tr["center"][:2]) - centre))) <= match]
+                tracked.append(bool(near))
+                moving.append(any(tr.get("dynamic") for tr in near))
+            last = min(frames, key=lambda r: abs(r["t"] - t))
+            person = next((q for q in last["people"] if q["id"] == c["other_id"]), None)
+            if person is not None and s is not None:
+                d = _centre(person)[:2] - np.asarray(s["p"], float)[:2]
+                u = d / max(float(np.hypot(*d)), 1e-9)
+                pv = np.asarray(person["v"], float)[:2]
+                row.update(drone_closing=round(float(v @ u), 2), person_closing=round(float(-pv @ u), 2))
+            n = max(len(seen), 1)
+            row.update(in_view=round(sum(seen) / n, 2), tracked=round(sum(tracked) / n, 2),
+                       reported_moving=round(sum(moving) / n, 2))
+        rows.append(row)
+    return rows
+
+
+def logs_under(path: Path) -> list[Path]:
+    """An episode log itself, the log of a run folder, or every episode log of a sweep folder."""
+    path = Path(path)
+    if path.is_file():
+        return [path]
+    if (path / "log.jsonl.gz").is_file():
+        return [path / "log.jsonl.gz"]
+    found = sorted(path.glob("episodes/*/log.jsonl.gz"))
+    if not found:
+        raise ValueError(f"{path}: no episode log (log.jsonl.gz) and no sweep episodes/ with logs")
+    return found
+
+
+def format_table(rows: list[dict]) -> str:
+    cols = ["seed", "t", "kind", "other_id", "drone_speed", "drone_closing", "person_closing", "in_view", "tracked",
+            "reported_moving"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for r in rows:
+        lines.append("| " + " | ".join("" if r.get(k) is None else str(r[k]) for k in cols) + " |")
+    return "\n".join(lines)

@@ -1,0 +1,52 @@
+"""experiments.collision_report and `dodt-nav collisions`: rows computed from hand-made episode records."""
+import gzip
+import json
+
+import numpy as np
+
+from experiments.cli import main
+from experiments.collision_report import collision_rows
+
+EYE = np.eye(3).ravel().tolist()  # heading +x
+
+
+def _person(centre, v):
+    x, y = centre
+    return {"id": 5, "lo": [x - 0.25, y - 0.25, 0.0], "hi": [x + 0.25, y + 0.25, 1.7], "v": [v[0], v[1], 0.0]}
+
+
+def _records():
+    recs = [{"k": "header", "seed": 3}]
+    recs += [{"k": "s", "t": t, "p": [0.0, 0.0, 1.2], "v": [1.0, 0.0, 0.0], "r": [0, 0, 1.2], "c": [1, 1, 1]}
+             for t in np.arange(0.0, 2.01, 0.5)]
+    for t in (0.5, 1.0, 1.5, 2.0):
+        ahead = t <= 1.0  # 1 m ahead (in view, tracked moving), then 1 m to the right (out of view, untracked)
+        centre = (1.0, 0.0) if ahead else (0.0, -1.0)
+        tracks = [{"id": 1, "center": [centre[0], centre[1], 0.85], "dynamic": True}] if ahead else []
+        recs.append({"k": "f", "t": t, "p": [0.0, 0.0, 1.2], "R": EYE, "tracks": tracks,
+                     "people": [_person(centre, (0.0, 1.0))]})
+    recs.append({"k": "collision", "t": 2.0, "kind": "person", "other_id": 5, "position": [0.0, 0.0, 1.2]})
+    recs.append({"k": "collision", "t": 2.0, "kind": "static", "other_id": 2, "position": [0.0, 0.0, 1.2]})
+    return recs
+
+
+def test_rows_say_who_closed_in_and_whether_the_person_was_seen():
+    person, static = collision_rows(_records())
+    assert person["seed"] == 3 and person["kind"] == "person" and person["drone_speed"] == 1.0
+    assert person["drone_closing"] == 0.0  # the drone flies along x; the person is beside it
+    assert person["person_closing"] == 1.0  # walking straight at the drone
+    assert person["in_view"] == person["tracked"] == person["reported_moving"] == 0.5
+    assert collision_rows(_records(), window=0.9)[0]["in_view"] == 0.0  # only the last frames: out of view
+    assert static["kind"] == "static" and "in_view" not in static
+
+
+def test_cli_prints_a_table_and_names_a_folder_without_logs(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    with gzip.open(run / "log.jsonl.gz", "wt", encoding="utf-8") as fh:
+        fh.write("\n".join(json.dumps(r) for r in _records()) + "\n")
+    assert main(["collisions", str(run)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("| seed | t | kind") and len(out) == 4  # header, rule, two collisions
+    assert main(["collisions", str(tmp_path / "empty")]) == 2
+    assert "no episode log" in capsys.readouterr().err
