@@ -38,6 +38,7 @@ class NavigatorConfig:
     yield_fractions: tuple[float, ...] = (1.0,)
     heading_lead_steps: int = 5  # the heading follows the planned velocity this many MPC steps ahead
     heading_min_speed: float = 0.5  # m/s; slower plans face the path ahead instead
+    use_geofence: bool = True  # keep the plan inside PlannerInput.geofence (the corridor's walls) when given
     mpc: MPCConfig = field(default_factory=MPCConfig)
 
 
@@ -183,7 +184,8 @@ class MPCPlanner:
             hi = np.array([inp.position[0] + r, inp.position[1] + r, zc + h])
             static = occ.occupied_centers(lo, hi)
         res = self.mpc.solve(inp.stamp, inp.position, inp.velocity, inp.acceleration, p_ref, v_ref,
-                             obstacles=inp.obstacles, static_points=static, heading=inp.yaw)
+                             obstacles=inp.obstacles, static_points=static, heading=inp.yaw,
+                             geofence=inp.geofence if self.cfg.use_geofence else None)
         f = self.follower
         ahead, _ = f.at(np.array([f.project(inp.position[:2]) + self.cfg.look_ahead]))
         d = ahead[0] - inp.position[:2]

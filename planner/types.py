@@ -92,6 +92,7 @@ class PlannerInput:
     obstacles: tuple[ObstaclePrediction, ...]  # moving obstacles
     occupancy: object | None = None  # a planner.voxel_map.VoxelMap (static map), or None
     yaw: float | None = None  # current heading of the vehicle (and its forward camera) [rad]
+    geofence: tuple[np.ndarray, np.ndarray] | None = None  # known walls of the flight area: (lo, hi) in x, y [m]
 
 
 class Planner(Protocol):

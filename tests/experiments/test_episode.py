@@ -67,6 +67,7 @@ class _Raising:
 
     def plan(self, inp):
         self.calls += 1
+        self.geofence = inp.geofence
         raise RuntimeError("planner bug")
 
 
@@ -75,6 +76,8 @@ def test_foreign_perception_and_failing_planner_plug_in(tmp_path):
     s = run_episode(make_scenario(), seed=0, perception=perc, planner=planner, out=tmp_path,
                     cfg=EpisodeConfig(duration=1.0))
     assert perc.frames >= 30 and planner.calls >= 10
+    co = make_scenario().corridor  # the planner is told the corridor's walls
+    np.testing.assert_allclose(np.concatenate(planner.geofence), [0.0, -co.width / 2, co.length, co.width / 2])
     assert s["planner_stats"]["errors"] == s["planner_stats"]["plans"] > 0
     assert not s["reached_goal"] and s["timeout"]
     recs = read_log(tmp_path / "log.jsonl.gz")

@@ -110,7 +110,8 @@ def test_crossing_person_is_passed_behind_not_raced(direction):
     """relative_side: the tie-break runs across the person's velocity relative to the drone, toward the
     person's back, so the drone crosses the person's line behind them from either side. The tie to the
     left of travel does so only for a person coming from the left: one from the right is raced and
-    passed in front of, in their way."""
+    passed in front of, in their way. (One QP per call: with both sides tried, the rule only says
+    which side is kept when neither is clearly cheaper.)"""
     people = [([2.0, -2.0 * direction, 0.9], [0.0, 1.0 * direction, 0.0])]
 
     def crossing(cfg):
@@ -121,8 +122,8 @@ def test_crossing_person_is_passed_behind_not_raced(direction):
         assert_clear_of_people(samples, times, people)
         return direction * (samples[i, 1] - (-2.0 * direction + direction * times[i]))  # drone's lead over the person
 
-    assert crossing(MPCConfig(relative_side=True)) < -0.5  # behind the person
-    lead = crossing(MPCConfig(relative_side=False))
+    assert crossing(MPCConfig(relative_side=True, homotopy_obstacles=0)) < -0.5  # behind the person
+    lead = crossing(MPCConfig(relative_side=False, homotopy_obstacles=0))
     assert lead > 0.5 if direction > 0 else lead < -0.5
 
 
@@ -144,7 +145,9 @@ def test_static_wall_gap_is_passed():
     crossing = samples[np.argmin(np.abs(samples[:, 0] - 4.0))]
     required = CFG.robot_radius + CFG.voxel_size / 2 + CFG.static_margin
     assert abs(crossing[1]) <= 0.9 - required + 0.01  # within the free part of the gap
-    assert max(r.max_slack_static for r in results[1:]) < 0.02
+    # the greedy planes of the two edges, linearised at the previous plan, may ask a few cm more than the gap
+    # holds for a step or two; the executed path above is what must stay clear
+    assert max(r.max_slack_static for r in results[1:]) < 0.1
 
 
 def test_pillar_on_the_reference_is_passed_beside():
@@ -238,3 +241,69 @@ def test_same_inputs_same_outputs():
         for x, y in [(a.trajectory.positions, b.trajectory.positions),
                      (a.trajectory.accelerations, b.trajectory.accelerations)]:
             assert np.array_equal(x, y)
+
+
+def test_geofence_keeps_the_plan_off_a_known_wall():
+    """(7): a reference running 0.2 m from a side wall the map does not hold; with the geofence the flown
+    path keeps geofence_margin from it, without it the path follows the reference."""
+    lo, hi = np.array([-1.0, -2.0]), np.array([20.0, 2.0])
+
+    def run(fence):
+        mpc, p, v, a, ys = MPC(), np.array([0.0, 1.0, 1.2]), np.zeros(3), np.zeros(3), []
+        for k in range(40):
+            p_ref, v_ref = line_ref(p, np.array([15.0, 1.8, 1.2]))
+            p_ref[:, 1] = 1.8
+            r = mpc.solve(k * DT, p, v, a, p_ref, v_ref, geofence=fence)
+            assert r.status == "solved"
+            p, v, a = r.trajectory.positions[1].copy(), r.trajectory.velocities[1].copy(), r.trajectory.accelerations[0].copy()
+            ys.append(p[1])
+        return np.array(ys)
+
+    inside = hi[1] - CFG.geofence_margin
+    assert run((lo, hi)).max() <= inside + 0.02
+    assert run(None)[-10:].min() > 1.7
+
+
+def test_comfort_margin_passes_a_standing_person_wider():
+    """A person standing 0.3 m beside the reference line: the hard margin alone is kept at its edge, the
+    soft comfort margin adds room where it costs only a small detour."""
+    people = [([4.0, 0.3, 0.9], [0.0, 0.0, 0.0])]
+
+    def clearance(cfg):
+        _, samples, times = closed_loop(MPC(cfg), np.array([0.0, 0.0, 1.2]), np.array([8.0, 0.0, 1.2]), people,
+                                        steps=60)
+        assert_clear_of_people(samples, times, people)
+        assert samples[-1, 0] > 7.0
+        return float(np.min(np.hypot(samples[:, 0] - 4.0, samples[:, 1] - 0.3)))
+
+    hard = PERSON[0] / 2 + CFG.robot_radius + CFG.dynamic_margin
+    without = clearance(MPCConfig(comfort_margin=0.0))
+    with_comfort = clearance(MPCConfig(comfort_margin=0.5))
+    assert without < hard + 0.15
+    assert with_comfort > without + 0.25
+
+
+@pytest.mark.parametrize("homotopy", [0, 1])
+def test_squeezed_side_is_left_for_the_open_one(homotopy):
+    """A person walking head-on just right of the drone's line, a wall 0.7 m to the drone's left: the
+    tie-break says pass left, where the hard margin does not fit between person and wall. One QP per call
+    keeps that side and goes through on slack; trying both sides (homotopy_obstacles) takes the open right."""
+    fence = (np.array([-1.0, -2.0]), np.array([20.0, 1.0]))
+    mpc, p, v, a = MPC(MPCConfig(homotopy_obstacles=homotopy, comfort_margin=0.0)), np.array([0.0, 0.3, 1.2]), \
+        np.zeros(3), np.zeros(3)
+    slack, gap, ys = [], [], []
+    for k in range(50):
+        ob = person(0, [5.0, 0.0, 0.9], [-1.0, 0.0, 0.0], k * DT)
+        p_ref, v_ref = line_ref(p, np.array([12.0, 0.3, 1.2]))
+        r = mpc.solve(k * DT, p, v, a, p_ref, v_ref, obstacles=[ob], geofence=fence)
+        assert r.status == "solved"
+        slack.append(r.max_slack_dynamic)
+        gap.append(np.hypot(*(p[:2] - ob.center[:2])))
+        ys.append(p[1])
+        p, v, a = r.trajectory.positions[1].copy(), r.trajectory.velocities[1].copy(), r.trajectory.accelerations[0].copy()
+    hard = PERSON[0] / 2 + CFG.robot_radius + CFG.dynamic_margin
+    if homotopy:
+        assert max(slack) < 0.02 and min(ys) < -0.5  # passed on the right, margin kept
+        assert min(gap) > hard - 0.1
+    else:
+        assert max(slack) > 0.2 and min(ys) > 0.0  # squeezed on the left
