@@ -371,6 +371,21 @@ class VoxelMap:
         ijk = np.argwhere(self.log_odds[a[0]:b[0], a[1]:b[1], a[2]:b[2]] >= self.l_occ) + a
         return self.origin + (ijk + 0.5) * self.res
 
+    def established_fraction(self, center, size) -> float:
+        """Share of the box's footprint columns (voxel columns whose centres lie in the world AABB
+        center +- size/2) holding a voxel occupied for static_after updates or more, within the box's
+        height: how much of the box lies on long-seen structure. 0 for an empty or invalid box."""
+        c, h = np.asarray(center, float), np.asarray(size, float) / 2
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(h))):
+            return 0.0
+        a = np.clip(np.ceil((c - h - self.origin) / self.res - 0.5), 0, self.dims).astype(int)
+        b = np.clip(np.floor((c + h - self.origin) / self.res - 0.5) + 1, 0, self.dims).astype(int)
+        if np.any(b <= a):
+            return 0.0
+        box = np.s_[a[0]:b[0], a[1]:b[1], a[2]:b[2]]
+        old = (self.log_odds[box] >= self.l_occ) & (self._updates - self._since[box] >= self._static_after)
+        return float(np.count_nonzero(old.any(axis=2))) / float((b[0] - a[0]) * (b[1] - a[1]))
+
     def inflated_occupied(self, points) -> np.ndarray:
         """(M,) bool: an occupied voxel lies within the robot-size inflation of the point's voxel
         (points outside the map: False)."""

@@ -46,3 +46,41 @@ def test_oracle_modes_are_known_and_need_the_truth():
     assert {"oracle", "oracle-360"} <= set(known_modes())
     with pytest.raises(ValueError, match="ground truth"):
         make_perception("oracle-360").update(FRAME, None)
+
+
+def _track(coasting, speed=0.8, dynamic=False, size=(0.5, 0.5, 1.7)):
+    from dodt.result import TrackedObstacle
+    return TrackedObstacle(id=7, center=np.array([3.0, 0.0, 0.85]), size=np.array(size),
+                           velocity=np.array([speed, 0.0, 0.0]), acceleration=np.zeros(3), dynamic=dynamic,
+                           coasting=coasting, age=1.0, history=np.zeros((0, 4)))
+
+
+def _rule_only(rule):
+    from experiments.perception_modes import DODTPerception
+    p = DODTPerception.__new__(DODTPerception)  # the rule only: no DODT pipeline needed
+    p.moving_rule, p.structure_test, p._on_structure = rule, None, set()
+    return p
+
+
+def test_moving_track_rule_passes_person_like_tracks_at_walking_speed():
+    """A person-sized track at walking speed reaches the planner though DODT labels it static (coasting
+    too, unless `measured`); a wall-sized or slow one does not."""
+    from experiments.perception_modes import MovingTrackRule
+    p = _rule_only(MovingTrackRule(measured=False))
+    assert p._moving(_track(coasting=False)) and p._moving(_track(coasting=True))
+    assert not p._moving(_track(coasting=False, speed=0.2))
+    assert not p._moving(_track(coasting=False, size=(2.5, 0.3, 1.7)))
+    p = _rule_only(MovingTrackRule(measured=True))
+    assert p._moving(_track(coasting=False)) and not p._moving(_track(coasting=True))
+
+
+def test_moving_track_rule_drops_a_track_once_seen_on_long_held_structure():
+    from experiments.perception_modes import MovingTrackRule
+    p = _rule_only(MovingTrackRule(measured=False, on_structure=0.2))
+    share = {"v": 0.0}
+    p.structure_test = lambda c, s: share["v"]
+    assert p._moving(_track(coasting=False))
+    share["v"] = 0.5  # measured on a static obstacle's edge: dropped, and for good
+    assert not p._moving(_track(coasting=False))
+    share["v"] = 0.0
+    assert not p._moving(_track(coasting=True)) and not p._moving(_track(coasting=False))

@@ -297,3 +297,16 @@ def test_camera_outside_the_map_or_a_bad_pose_casts_nothing():
         assert out["rays"] == 0 and out["bad_pixels"] == len(range(2, 10, 2)) * len(range(2, 638, 2))
     assert not m.is_free(_pts(np.linspace(0.5, 2.9, 5), [0.0], [1.2])).any()
     assert m.update(d, K, T)["rays"] > 0  # and the next good frame is cast as usual
+
+
+def test_established_fraction_counts_long_held_columns_only():
+    box = (np.array([2.03, -0.27, 0.0]), np.array([2.43, 0.23, 1.5]))
+    m = VoxelMap(SMALL)
+    _feed(m, [box], 3)
+    on_face = (np.array([2.1, 0.0, 0.8]), np.array([0.2, 0.4, 1.0]))  # straddles the seen face
+    assert m.established_fraction(*on_face) == 0.0  # occupied, but for 3 updates only
+    _feed(m, [box], m.cfg.static_after + 5)  # (a voxel turns occupied after a few hits)
+    share = m.established_fraction(*on_face)
+    assert 0.2 <= share <= 0.8  # the face column row, not the free space in front of it
+    assert m.established_fraction(np.array([1.0, 0.0, 0.8]), np.array([0.4, 0.4, 1.0])) == 0.0  # free space
+    assert m.established_fraction(np.array([np.nan, 0.0, 0.8]), np.array([0.4, 0.4, 1.0])) == 0.0
