@@ -276,6 +276,22 @@ class MPC:
         tr = Trajectory(tr.t0, tr.dt, tr.positions, tr.velocities, tr.accelerations, status=tr.status, solve_ms=ms)
         return MPCResult(tr, tr.status, iters, 0.0, 0.0, ms, ignored)
 
+    def _tolerance(self, solver, loose: bool) -> None:
+        """The normal OSQP limits, or the short, loose ones other passing sides are compared on."""
+        c = self.cfg
+        solver.update_settings(max_iter=c.homotopy_max_iter if loose else c.max_iter,
+                               eps_abs=c.homotopy_eps if loose else c.eps_abs,
+                               eps_rel=c.homotopy_eps if loose else c.eps_rel)
+
+    def _rejected(self, res) -> str:
+        """Why an OSQP result cannot be used ('' when it can): solved (or out of iterations with a primal
+        residual below max_prim_res) and finite."""
+        st = osqp.SolverStatus(res.info.status_val)
+        ok = st in _OK or (st == osqp.SolverStatus.OSQP_MAX_ITER_REACHED and res.info.prim_res < self.cfg.max_prim_res)
+        if not ok:
+            return st.name.removeprefix("OSQP_").lower()
+        return "" if np.all(np.isfinite(res.x)) else "nonfinite_solution"
+
     def _tie_break(self, d, side, forced=None):
         """Offsets d (N, J, 3) from obstacle j to c_k whose component along side[j] is below side_bias get
         it raised to side_bias (on their side, left if 0): a symmetric head-on plan would otherwise only
@@ -328,7 +344,7 @@ class MPC:
             e = cand[j]
             kk = int(np.argmin(np.linalg.norm(c - e[2], axis=1)))
             lat = float((c[kk] - e[2][kk]) @ e[4])
-            first[j] = self._sides.get(k, -1.0 if lat < 0 else 1.0) if k is not None else (-1.0 if lat < 0 else 1.0)
+            first[j] = self._sides.get(k, -1.0 if lat < 0 else 1.0)  # (ids of None are never kept)
         combos = [first]
         for signs in itertools.product((1.0, -1.0), repeat=len(M)):
             f = np.zeros(len(cand))
@@ -558,7 +574,7 @@ class MPC:
                 l[self._rd:self._rs].reshape(N, -1)[:, :J] = bd
                 if cfg.comfort_margin > 0:
                     Ax[self._com_pos[:, :J]] = nd
-                    l[self._rc:self._rc + self.cfg.max_dynamic * N].reshape(N, -1)[:, :J] = bd + cfg.comfort_margin
+                    l[self._rc:self._rc + cfg.max_dynamic * N].reshape(N, -1)[:, :J] = bd + cfg.comfort_margin
                 solver, z0, y0, key = self.solver, zw0, yw0, None
                 if forced is not None:  # each passing-side pattern keeps its own solver and warm start
                     key = tuple(float(forced[j]) for j, _ in sorted(enum_ids, key=lambda e: str(e[1])))
@@ -570,21 +586,16 @@ class MPC:
                         z0, y0 = self._shift(pv[1], self._xblocks, sk), self._shift(pv[2], self._yblocks, sk)
                 solver.update(q=q, l=l, u=u, Ax=Ax)
                 # the other sides are only compared: a looser, shorter solve; the one kept is refined below
-                loose = forced is not None and i > 0
-                solver.update_settings(max_iter=cfg.homotopy_max_iter if loose else cfg.max_iter,
-                                       eps_abs=cfg.homotopy_eps if loose else cfg.eps_abs,
-                                       eps_rel=cfg.homotopy_eps if loose else cfg.eps_rel)
+                loose = i > 0
+                self._tolerance(solver, loose)
                 solver.warm_start(x=z0, y=y0)
                 res = solver.solve(raise_error=False)
                 if key is not None and np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.y)):
                     self._slot_prev[key] = (float(t0), np.array(res.x), np.array(res.y))
                 iters += int(res.info.iter)
                 n_hom += 1
-                st = osqp.SolverStatus(res.info.status_val)
-                ok = st in _OK or (st == osqp.SolverStatus.OSQP_MAX_ITER_REACHED
-                                   and res.info.prim_res < cfg.max_prim_res)
-                if not ok or not np.all(np.isfinite(res.x)):
-                    why = "nonfinite_solution" if ok else st.name.removeprefix("OSQP_").lower()
+                why = self._rejected(res)
+                if why:
                     continue
                 cost = float(res.info.obj_val) + const
                 if i > 0:  # hysteresis: another side must be clearly cheaper than the one kept so far
@@ -598,15 +609,13 @@ class MPC:
             _, zw, yw, nd, bd, forced, (solver, Ax, lb, loose) = best  # (a second round starts from this solution)
             if loose:  # another side won on a loose solve: finish it to the normal tolerance from there
                 solver.update(q=q, l=lb, u=u, Ax=Ax)
-                solver.update_settings(max_iter=cfg.max_iter, eps_abs=cfg.eps_abs, eps_rel=cfg.eps_rel)
+                self._tolerance(solver, False)
                 solver.warm_start(x=zw, y=yw)
                 res = solver.solve(raise_error=False)
                 iters += int(res.info.iter)
-                st = osqp.SolverStatus(res.info.status_val)
-                if (st in _OK or (st == osqp.SolverStatus.OSQP_MAX_ITER_REACHED and res.info.prim_res < cfg.max_prim_res)) \
-                        and np.all(np.isfinite(res.x)):
+                if not self._rejected(res):
                     zw, yw = np.array(res.x), np.array(res.y)
-            self._sides = {} if forced is None else {k: float(forced[j]) for j, k in enum_ids}
+            self._sides = {} if forced is None else {k: float(forced[j]) for j, k in enum_ids if k is not None}
             acc = np.clip(zw[self._iu:self._isd].reshape(N, 3), -self._amax, self._amax)
             pos, vel = _rollout(p0, v0, acc, dt)
             c = pos[1:]
