@@ -284,9 +284,7 @@ class VoxelMap:
         for r in regions:
             if np.all(r[3:] >= r[:3]):
                 box = np.s_[r[0]:r[3] + 1, r[1]:r[4] + 1, r[2]:r[5] + 1]
-                lo = self.log_odds[box]
-                old = (lo >= self.l_occ) & (self._updates - self._since[box] >= self._static_after)
-                lo[~old] = np.float32(self.l_min)
+                self.log_odds[box][~self._established(box)] = np.float32(self.l_min)
         self._history.append(np.array(regions, np.int32).reshape(-1, 6))
         hist = np.concatenate(list(self._history))
         T = np.asarray(T_world_camera, dtype=np.float64)
@@ -362,10 +360,20 @@ class VoxelMap:
     def occupied_count(self) -> int:
         return int(np.count_nonzero(self.occupied()))
 
-    def occupied_centers(self, lo, hi) -> np.ndarray:
-        """(K, 3) float64 world centres of occupied voxels whose centres lie in the AABB [lo, hi]."""
+    def _centre_range(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """Index ranges [a, b) per axis of the voxels whose centres lie in the world AABB [lo, hi], clipped
+        to the map (empty where any b <= a)."""
         a = np.clip(np.ceil((np.asarray(lo, float) - self.origin) / self.res - 0.5), 0, self.dims).astype(int)
         b = np.clip(np.floor((np.asarray(hi, float) - self.origin) / self.res - 0.5) + 1, 0, self.dims).astype(int)
+        return a, b
+
+    def _established(self, box) -> np.ndarray:
+        """Bool mask over the slice `box`: voxels occupied for static_after updates or more."""
+        return (self.log_odds[box] >= self.l_occ) & (self._updates - self._since[box] >= self._static_after)
+
+    def occupied_centers(self, lo, hi) -> np.ndarray:
+        """(K, 3) float64 world centres of occupied voxels whose centres lie in the AABB [lo, hi]."""
+        a, b = self._centre_range(lo, hi)
         if np.any(b <= a):
             return np.zeros((0, 3))
         ijk = np.argwhere(self.log_odds[a[0]:b[0], a[1]:b[1], a[2]:b[2]] >= self.l_occ) + a
@@ -378,12 +386,10 @@ class VoxelMap:
         c, h = np.asarray(center, float), np.asarray(size, float) / 2
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(h))):
             return 0.0
-        a = np.clip(np.ceil((c - h - self.origin) / self.res - 0.5), 0, self.dims).astype(int)
-        b = np.clip(np.floor((c + h - self.origin) / self.res - 0.5) + 1, 0, self.dims).astype(int)
+        a, b = self._centre_range(c - h, c + h)
         if np.any(b <= a):
             return 0.0
-        box = np.s_[a[0]:b[0], a[1]:b[1], a[2]:b[2]]
-        old = (self.log_odds[box] >= self.l_occ) & (self._updates - self._since[box] >= self._static_after)
+        old = self._established(np.s_[a[0]:b[0], a[1]:b[1], a[2]:b[2]])
         return float(np.count_nonzero(old.any(axis=2))) / float((b[0] - a[0]) * (b[1] - a[1]))
 
     def inflated_occupied(self, points) -> np.ndarray:
