@@ -1,8 +1,9 @@
 """Walking people: paths from behaviours, and the DeepMimic humanoid animated from mocap.
 
 A person's path is planned once, at world build, from its behaviour and the seed: a long
-polyline walked at constant speed after the start delay. Position and velocity at any time
-follow from it exactly, which is what ground truth reports. The body is pybullet_data's
+polyline walked at the set speed, slowing down for tight corners and U-turns and speeding up
+again at a walker's acceleration (WalkPath). Position and velocity at any time follow from it
+exactly, which is what ground truth reports: the velocity is the position's rate of change. The body is pybullet_data's
 DeepMimic humanoid (``humanoid/humanoid.urdf``, Y-up, 1.62 m at globalScaling 0.25) posed
 kinematically from the walking clip (``data/motions/humanoid3d_walk.txt``: 38 intervals of
 1/30 s per gait cycle, the root advancing 1.2386 m). The gait phase follows the distance
@@ -128,10 +129,28 @@ def _pose_table(samples_per_interval: int = 10) -> _PoseTable:
 # --------------------------------------------------------------------------- paths
 
 
-class WalkPath:
-    """A polyline walked at constant speed from ``start_delay`` on; standing at its end."""
+# How people change speed (ours; the polyline alone would have them reverse at 0.9 m/s in one
+# step at the end of a back-and-forth leg, an acceleration no person makes):
+WALK_ACCELERATION = 1.0  # m/s^2, speeding up from standing and slowing down to stop or turn
+TURN_LATERAL_ACCELERATION = 2.0  # m/s^2 at most around a corner: tight corners are walked slower
+TURN_SPEED_STEP = 0.2  # m/s, the largest velocity change at one polyline vertex (a U-turn's)
+_SPEED_GRID = 0.05  # m, the speed profile's sampling along the path
 
-    def __init__(self, points: np.ndarray, speed: float, start_delay: float):
+
+class WalkPath:
+    """A polyline walked from ``start_delay`` on at up to ``speed``; standing at its end.
+
+    A walker with a start delay starts from standing (one without is walking already when the
+    scenario starts); it slows down before corners (to keep the lateral
+    acceleration at ``TURN_LATERAL_ACCELERATION``; at a U-turn nearly to a stop) and before
+    the end, and speeds up again, all at ``WALK_ACCELERATION``: position and velocity are
+    continuous, as a person's are. The speed profile v(s) is sampled along the path with v^2
+    piecewise linear in s (constant acceleration in each cell), so distance(t) and velocity(t)
+    are exact for it.
+    """
+
+    def __init__(self, points: np.ndarray, speed: float, start_delay: float,
+                 acceleration: float = WALK_ACCELERATION):
         self.points = np.asarray(points, dtype=float)
         self.speed = float(speed)
         self.start_delay = float(start_delay)
@@ -140,14 +159,65 @@ class WalkPath:
         self._cum = [0.0] + np.cumsum(seg_len).tolist()
         self._xy = self.points.tolist()
         self._dir = (seg / np.maximum(seg_len, 1e-12)[:, None]).tolist()
+        self._profile(seg / np.maximum(seg_len, 1e-12)[:, None], seg_len, float(acceleration))
+
+    def _profile(self, dirs: np.ndarray, seg_len: np.ndarray, acc: float) -> None:
+        """Speed limits at the vertices, a forward (speeding up) and a backward (slowing down)
+        pass over a grid in s, then the time at each grid point."""
+        cum = np.asarray(self._cum)
+        L = cum[-1]
+        n_cells = np.maximum(np.ceil(seg_len / _SPEED_GRID).astype(int), 1)
+        s = np.concatenate([np.linspace(cum[i], cum[i + 1], n_cells[i] + 1)[:-1] for i in range(len(seg_len))]
+                           + [[L]]) if len(seg_len) else np.array([0.0])
+        cap = np.full(len(s), self.speed)
+        cap[-1] = 0.0  # standing at the end
+        if self.start_delay > 0:
+            cap[0] = 0.0  # standing until start_delay, then speeding up (without one: walking already)
+        for i in range(1, len(dirs)):  # vertex i joins segments i-1 and i
+            cos_turn = float(np.clip(dirs[i - 1] @ dirs[i], -1.0, 1.0))
+            turn = math.acos(cos_turn)
+            if turn < 1e-6:
+                continue
+            curvature = turn / max(0.5 * (seg_len[i - 1] + seg_len[i]), 1e-6)
+            v = min(self.speed, math.sqrt(TURN_LATERAL_ACCELERATION / curvature),
+                    TURN_SPEED_STEP / (2.0 * math.sin(turn / 2)))
+            k = int(np.searchsorted(s, cum[i]))
+            k = min(k, len(s) - 1)
+            cap[k] = min(cap[k], v)
+        v2 = cap ** 2
+        ds = np.diff(s)
+        for k in range(1, len(s)):
+            v2[k] = min(v2[k], v2[k - 1] + 2 * acc * ds[k - 1])
+        for k in range(len(s) - 2, -1, -1):
+            v2[k] = min(v2[k], v2[k + 1] + 2 * acc * ds[k])
+        v = np.sqrt(v2)
+        dt = np.where(ds > 0, 2 * ds / np.maximum(v[:-1] + v[1:], 1e-9), 0.0)
+        self._s = s.tolist()
+        self._v = v.tolist()
+        self._t = np.concatenate([[0.0], np.cumsum(dt)]).tolist()
+        self._a = np.where(ds > 0, (v2[1:] - v2[:-1]) / np.maximum(2 * ds, 1e-12), 0.0).tolist()
+        self.duration = self._t[-1]  # s from the start to standing at the end
 
     @property
     def length(self) -> float:
         return self._cum[-1]
 
+    def _state(self, t: float) -> tuple[float, float]:
+        """(arc length walked, speed) at time t."""
+        tau = t - self.start_delay
+        if tau < 0.0 or self.length <= 0.0:
+            return 0.0, 0.0
+        if tau >= self.duration:
+            return self.length, 0.0
+        k = min(max(bisect.bisect_right(self._t, tau) - 1, 0), len(self._t) - 2)
+        d = tau - self._t[k]
+        a = self._a[k]
+        s = min(self._s[k] + self._v[k] * d + 0.5 * a * d * d, self._s[k + 1])
+        return s, max(self._v[k] + a * d, 0.0)
+
     def distance(self, t: float) -> float:
         """Arc length walked by time t."""
-        return min(max(t - self.start_delay, 0.0) * self.speed, self.length)
+        return self._state(t)[0]
 
     def _segment(self, s: float) -> int:
         return min(max(bisect.bisect_right(self._cum, s) - 1, 0), len(self._cum) - 2)
@@ -170,11 +240,11 @@ class WalkPath:
         return np.array([a[0] + s * d[0], a[1] + s * d[1]])
 
     def velocity(self, t: float) -> np.ndarray:
-        s = (t - self.start_delay) * self.speed
-        if t < self.start_delay or s >= self.length:
+        s, v = self._state(t)
+        if v <= 0.0:
             return np.zeros(2)
         d = self._dir[self._segment(s)]
-        return np.array([self.speed * d[0], self.speed * d[1]])
+        return np.array([v * d[0], v * d[1]])
 
     def heading(self, t: float, window: float = 0.3) -> float:
         """Body heading: direction of the path around the current point, smoothed over

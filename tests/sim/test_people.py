@@ -8,7 +8,7 @@ import pytest
 
 from conftest import make_scenario
 from sim import World
-from sim.people import load_walk_clip, plan_path
+from sim.people import TURN_SPEED_STEP, WALK_ACCELERATION, load_walk_clip, plan_path
 from sim.scenario import PERSON_HEIGHT_RANGE
 
 
@@ -154,4 +154,35 @@ def test_circle_and_back_and_forth_paths():
     bf = plan_path(sc.people[1], sc, rng, 30.0)
     xs = [bf.position(t)[0] for t in np.linspace(0, 30, 600)]
     assert min(xs) == pytest.approx(2.0, abs=0.06) and max(xs) == pytest.approx(4.0, abs=0.06)
-    assert bf.position(2.0)[0] == pytest.approx(4.0) and bf.position(4.0)[0] == pytest.approx(2.0)
+    # each end is reached and turned at (nearly) standstill, then walked away from
+    ends = [t for t in np.arange(0, 12, 0.01) if abs(bf.position(t)[0] - 4.0) < 1e-3]
+    assert ends and all(np.linalg.norm(bf.velocity(t)) < 0.15 for t in ends)
+    t4 = ends[0]
+    assert bf.velocity(t4 + 0.5)[0] < -0.3 and bf.position(t4 + 1.0)[0] < 3.7
+
+
+@pytest.mark.parametrize("behaviour", ["back_and_forth", "random_walk", "crossing"])
+def test_walkers_change_velocity_as_people_do_and_velocity_is_the_rate_of_position(behaviour):
+    """The ground truth velocity must be what the body does: the derivative of the position,
+    with accelerations a person makes (no reversal at walking speed in one step at a U-turn,
+    no jump from standing to walking speed)."""
+    body = {"back_and_forth": 'waypoints = [[2.0, 1.5], [5.0, 1.5]]\n',
+            "random_walk": 'region = [2.0, -1.5, 8.0, 1.5]\n',
+            "crossing": 'waypoints = [[2.0, -1.0], [5.0, -1.0], [5.0, 1.5]]\nstart_delay = 0.5\n'}[behaviour]
+    sc = make_scenario(f'[[people]]\nbehaviour = "{behaviour}"\nspeed = 1.2\n' + body)
+    path = plan_path(sc.people[0], sc, np.random.default_rng(3), 20.0)
+    dt = 1 / 120
+    ts = np.arange(0.0, 20.0, dt)
+    pos = np.array([path.position(t) for t in ts])
+    vel = np.array([path.velocity(t) for t in ts])
+    # position is the integral of velocity (trapezoid rule, to well under a centimetre)
+    integrated = pos[0] + np.concatenate([[[0, 0]], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt, axis=0)])
+    assert np.max(np.linalg.norm(integrated - pos, axis=1)) < 0.01
+    dv = np.linalg.norm(np.diff(vel, axis=0), axis=1)
+    assert dv.max() <= TURN_SPEED_STEP + WALK_ACCELERATION * dt + 1e-9  # no jump beyond a vertex step
+    # over a tenth of a second, accelerations stay within what walking people do
+    acc = np.linalg.norm(vel[12:] - vel[:-12], axis=1) / (12 * dt)
+    assert acc.max() < 4.0
+    speed = np.linalg.norm(vel, axis=1)
+    assert speed.max() <= 1.2 + 1e-9 and np.median(speed[speed > 0]) > 0.9  # mostly at the set speed
+    assert (speed[0] == 0.0) == (behaviour == "crossing")  # from standing only after a start delay
