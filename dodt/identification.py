@@ -24,11 +24,18 @@ from dodt.frames import CameraIntrinsics
 from dodt.geometry import in_field_of_view
 
 
+def match_reach(dt: float, cfg: IdentificationConfig) -> float:
+    """The farthest a point's correspondence k frames back can lie [m]: as far as anything
+    walks in dt, plus a voxel."""
+    return cfg.max_point_speed * dt + 0.1
+
+
 def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_world_camera_then,
          K: CameraIntrinsics, max_depth: float, cfg: IdentificationConfig) -> tuple[int, int, int]:
     """(votes, valid, skipped) of the point voting.
 
-    ``cloud_then`` is a k-d tree (or an (M, 3) array) of the whole filtered cloud k frames back.
+    ``cloud_then`` is a k-d tree (or an (M, 3) array) of the whole filtered cloud k frames back,
+    or of the part of it within ``match_reach`` of the points (the matches are the same).
     Matching against the whole cloud, not only the track's own points back then, keeps a
     static obstacle static when its box grows (more of it seen, or split from a neighbour):
     its points find their unmoved twins wherever they were.
@@ -43,7 +50,7 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     # A nearest neighbour farther than anything walks in dt is no correspondence: that surface
     # was not in the cloud back then (occluded, too sparse, out of range). The search stops at
     # that bound (much faster); beyond it the tree answers distance inf and index M.
-    reach = cfg.max_point_speed * dt + 0.1
+    reach = match_reach(dt, cfg)
     dist, idx = cloud_then.query(points_now, distance_upper_bound=reach * (1 + 1e-9))
     seen &= dist <= reach
     v = (points_now - cloud_then.data[np.minimum(idx, cloud_then.n - 1)])[:, :2] / dt

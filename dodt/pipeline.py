@@ -20,7 +20,6 @@ import time
 from collections import deque
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from dodt.config import DODTConfig
 from dodt.dbscan import DBSCANDetector
@@ -72,7 +71,8 @@ class DODT:
     def __init__(self, cfg: DODTConfig | None = None, learned_detector=None):
         self.cfg = cfg or DODTConfig()
         self.cloud = VoxelCloud(self.cfg.depth, self.cfg.voxel)
-        self.udepth = UDepthDetector(self.cfg.udepth, self.cfg.depth)
+        self.udepth = UDepthDetector(self.cfg.udepth, self.cfg.depth,
+                                     (self.cfg.voxel.ground_height, self.cfg.voxel.ceiling_height))
         self.dbscan = DBSCANDetector(self.cfg.dbscan)
         if learned_detector is None and self.cfg.learned.enabled:
             from dodt.learned.fusion import YoloMAD  # loads onnxruntime and the model only when asked
@@ -82,7 +82,6 @@ class DODT:
         self.last_stamp: float | None = None
         self.poses: dict[int, np.ndarray] = {}
         self.clouds: dict[int, np.ndarray] = {}  # seq -> that frame's filtered cloud
-        self._trees: dict[int, object] = {}  # seq -> its k-d tree, built when first needed
         self._pose_order: deque[int] = deque()
         self.counters = {"frames": 0, "skipped_bad_pose": 0, "skipped_time": 0, "restarted_after_gap": 0,
                          "bad_pixels": 0, "frames_with_bad_pixels": 0}
@@ -93,17 +92,9 @@ class DODT:
         self.last_stamp = None
         self.poses.clear()
         self.clouds.clear()
-        self._trees.clear()
         self._pose_order.clear()
 
     # ------------------------------------------------------------------ helpers
-
-    def _tree(self, seq: int):
-        """k-d tree of frame seq's cloud (None if gone or empty), built once, when first asked."""
-        if seq not in self._trees:
-            pts = self.clouds.get(seq)
-            self._trees[seq] = cKDTree(pts) if pts is not None and len(pts) else None
-        return self._trees[seq]
 
     def _skip(self, frame: SensorFrame, why: str, bad_pixels: int = 0) -> PerceptionResult:
         self.counters[why] += 1
@@ -171,7 +162,6 @@ class DODT:
             old = self._pose_order.popleft()
             self.poses.pop(old, None)
             self.clouds.pop(old, None)
-            self._trees.pop(old, None)
 
         t0 = time.perf_counter()
         points = self.cloud(depth_m, frame.intrinsics, T)
@@ -188,7 +178,7 @@ class DODT:
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
-            tr.identify(seq, self.poses, self._tree, frame.intrinsics, self.cfg.depth.depth_max)
+            tr.identify(seq, self.poses, self.clouds.get, frame.intrinsics, self.cfg.depth.depth_max)
         t3 = time.perf_counter()
         timings = {"point_cloud": t_cloud, **debug["timings"], "association": (t1 - t0) * 1e3,
                    "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3,

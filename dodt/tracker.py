@@ -9,6 +9,7 @@ back; unmatched detections start tracks. Then each track is identified static or
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -18,7 +19,7 @@ from dodt.association import TrackView, assign, features, similarity_matrix
 from dodt.config import DODTConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics
-from dodt.identification import decide, is_candidate, size_ok, vote
+from dodt.identification import decide, is_candidate, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
 from dodt.result import TrackedObstacle
 
@@ -68,6 +69,7 @@ class Track:
         self.person_votes: deque[bool] = deque([det.is_person], maxlen=cfg.learned.person_window)
         self.coasting = False
         self.missed = 0  # consecutive frames without a detection
+        self.headings: deque[tuple[float, float]] = deque()  # (stamp, heading of the pseudo-measured velocity)
 
     @property
     def is_person(self) -> bool:
@@ -82,6 +84,38 @@ class Track:
         return TrackView(center=c, size=self.det_size, count=self.count, spread=self.spread,
                          position_variance=self.kf.position_variance)
 
+    def _turn_compensated(self, v: np.ndarray, stamp: float, span: float) -> np.ndarray:
+        """The difference quotient over ``span`` is the velocity of the middle of the span: on
+        a turn its direction lags the current one by turn rate x span / 2, so it is rotated
+        forward by that. The turn rate is the change of the quotient's heading over
+        ``turn_window`` seconds (about a gait cycle or more, over which the body's sway
+        cancels), and only a sustained turn counts: the rates of the window's two halves must
+        agree in sign, and the smaller is taken (a corner already turned, or sway, gives none)."""
+        k = self.cfg.kalman
+        if k.turn_window <= 0:
+            return v
+        if float(np.hypot(v[0], v[1])) < k.turn_min_speed:
+            self.headings.clear()
+            return v
+        heading = math.atan2(v[1], v[0])
+        self.headings.append((stamp, heading))
+        while len(self.headings) > 2 and stamp - self.headings[1][0] >= k.turn_window:
+            self.headings.popleft()
+        t0, h0 = self.headings[0]
+        if stamp - t0 < 0.8 * k.turn_window:
+            return v
+        tm, hm = min(self.headings, key=lambda e: abs(e[0] - 0.5 * (t0 + stamp)))
+        if not t0 < tm < stamp:
+            return v
+        w1 = ((hm - h0 + math.pi) % (2 * math.pi) - math.pi) / (tm - t0)
+        w2 = ((heading - hm + math.pi) % (2 * math.pi) - math.pi) / (stamp - tm)
+        if w1 * w2 <= 0:
+            return v
+        omega = math.copysign(min(abs(w1), abs(w2)), w1)
+        ang = omega * span / 2
+        c, s_ = math.cos(ang), math.sin(ang)
+        return np.array([c * v[0] - s_ * v[1], s_ * v[0] + c * v[1]])
+
     def update(self, det: Detection, seq: int, stamp: float) -> None:
         k = self.cfg.kalman
         obs = list(self.observations)
@@ -92,6 +126,7 @@ class Track:
         self.offset = 0.7 * self.offset + 0.3 * (det.center[:2] - anchor)
         if dt > 1e-6:
             v = (anchor - prev.center[:2]) / dt
+            v = self._turn_compensated(v, stamp, dt)
         else:
             v = self.kf.velocity.copy()
         # Acceleration needs a velocity measured back then; until there is one, measure none
@@ -113,8 +148,8 @@ class Track:
         self.person_votes.append(det.is_person)
         self.coasting = False
 
-    def identify(self, seq: int, poses: dict, cloud_tree, K: CameraIntrinsics, max_depth: float) -> None:
-        """cloud_tree(seq) -> k-d tree of that frame's whole filtered cloud, or None."""
+    def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float) -> None:
+        """clouds(seq) -> that frame's whole filtered cloud, or None."""
         cfg = self.cfg.identification
         if self.is_person:
             cand = True
@@ -131,10 +166,19 @@ class Track:
             if old and cfg.method != "velocity" and speed >= cfg.velocity_threshold:
                 o_seq, o_t, o_pts = old[0]
                 T_then = poses.get(o_seq)
-                tree_then = cloud_tree(o_seq) if T_then is not None else None
-                if T_then is not None and tree_then is not None and len(o_pts) and len(cur_pts):
-                    v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(cur_t - o_t, 1e-6)
-                    votes, valid, skipped = vote(cur_pts, tree_then, cur_t - o_t, v_box, T_then, K, max_depth, cfg)
+                cloud_then = clouds(o_seq) if T_then is not None else None
+                if cloud_then is not None and len(cloud_then) and len(o_pts) and len(cur_pts):
+                    dt = cur_t - o_t
+                    v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(dt, 1e-6)
+                    # only the part of the old cloud within matching reach of the points can hold
+                    # their nearest neighbours: the same matches, from a much smaller k-d tree
+                    voters = cur_pts
+                    if 0 < cfg.max_vote_points < len(cur_pts):  # an even sample of a large obstacle
+                        voters = cur_pts[::-(-len(cur_pts) // cfg.max_vote_points)]
+                    r = match_reach(dt, cfg)
+                    lo, hi = voters.min(axis=0) - r, voters.max(axis=0) + r
+                    near = cloud_then[np.all((cloud_then >= lo) & (cloud_then <= hi), axis=1)]
+                    votes, valid, skipped = vote(voters, near, dt, v_box, T_then, K, max_depth, cfg)
             cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
         self.candidates.append(cand)
         self.dynamic = bool(self.is_person or decide(list(self.candidates), list(self.dynamic_history), cfg))

@@ -104,13 +104,25 @@ def _group_lines(U, u_min, min_len):
 
 
 @njit(cache=True, nogil=True)
-def _u_map(half, lo, hi, bw, bins):
+def _u_map(half, lo, hi, bw, bins, col_scale, fx, fy, cx, cy, R, t, zlo, zhi):
+    """Column histograms of depth; with zlo < zhi, pixels whose world height lies outside
+    [zlo, zhi] (the floor, the ceiling) are left out. A pixel's height is linear in its depth:
+    z = d (row term + column term) + t_z."""
     rows, cols = half.shape
     U = np.zeros((bins, cols), np.float32)
+    band = zlo < zhi
+    col_term = np.empty(cols)
+    for c in range(cols):
+        col_term[c] = R[2, 0] * (c / col_scale - cx) / fx
     for r in range(rows):
+        row_term = R[2, 1] * (r - cy) / fy + R[2, 2]
         for c in range(cols):
             d = half[r, c]
             if d > lo and d < hi:
+                if band:
+                    z = d * (row_term + col_term[c]) + t[2]
+                    if z < zlo or z > zhi:
+                        continue
                 b = int((d - lo) / bw)
                 if b >= bins:
                     b = bins - 1
@@ -162,25 +174,40 @@ def _box_points(depth, u0, u1, near, far, run_len, margin, step, fx, fy, cx, cy,
 
 
 class UDepthDetector:
-    def __init__(self, cfg: UDepthConfig, depth_cfg: DepthConfig):
+    def __init__(self, cfg: UDepthConfig, depth_cfg: DepthConfig, height_band: tuple[float, float] | None = None):
+        """``height_band``: (floor, ceiling) world heights [m]; pixels outside it stay out of the
+        U-depth map when ``cfg.height_filter`` is on (the pipeline passes the voxel filter's
+        ground and ceiling heights)."""
         self.cfg = cfg
         self.dcfg = depth_cfg
+        self.height_band = height_band
 
-    def u_map(self, depth_m: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
-        """(bins, W/2) float32 U-depth map, the bin width [m] and the half-width depth image."""
+    def u_map(self, depth_m: np.ndarray, K: CameraIntrinsics | None = None,
+              T_world_camera: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
+        """(bins, W/2) float32 U-depth map, the bin width [m] and the half-width depth image.
+        With K and the pose, the height band (if any) applies."""
         c = self.cfg
         H, W = depth_m.shape
         half = cv2.resize(depth_m, (int(W * c.col_scale), H), interpolation=cv2.INTER_NEAREST)
         bins = H // c.row_downsample
         lo, hi = c.min_dist, self.dcfg.depth_max
         bw = math.ceil((hi - lo) * 1000.0 / bins) / 1000.0
-        U = _u_map(half, lo, hi, bw, bins)
+        zlo, zhi = (0.0, 0.0)  # empty band: no height filter
+        R, t = np.eye(3), np.zeros(3)
+        fx = fy = 1.0
+        cx = cy = 0.0
+        if c.height_filter and self.height_band is not None and K is not None and T_world_camera is not None:
+            zlo, zhi = self.height_band
+            R = np.ascontiguousarray(T_world_camera[:3, :3], dtype=np.float64)
+            t = np.ascontiguousarray(T_world_camera[:3, 3], dtype=np.float64)
+            fx, fy, cx, cy = K.fx, K.fy, K.cx, K.cy
+        U = _u_map(half, lo, hi, bw, bins, float(half.shape[1]) / W, fx, fy, cx, cy, R, t, float(zlo), float(zhi))
         U = cv2.GaussianBlur(U, c.blur_size, c.blur_sigma)
         return U, bw, half
 
     def __call__(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> list[Detection]:
         c = self.cfg
-        U, bw, half = self.u_map(depth_m)
+        U, bw, half = self.u_map(depth_m, K, T_world_camera)
         rects = _group_lines(U, float(c.threshold_point * c.row_downsample), c.min_line_length)
         dets = []
         H, W = depth_m.shape

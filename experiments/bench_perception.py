@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dodt.config import DepthConfig
 from dodt.pipeline import DODT, MODULES
 from dodt.presets import PRESETS, preset
 from experiments.perception_metrics import RECALL_BINS, PerceptionMetrics, bin_labels
@@ -150,8 +151,9 @@ def write_recall_by_distance(out: Path, overall: dict) -> str:
         main = cfg in ("dodt", "dodt+yolo")
         ax.plot(mids, [100 * s["recall_by_distance"][b] for b in labels], "o-" if main else "-",
                 lw=2.5 if main else 0.8, alpha=1.0 if main else 0.5, label=cfg)
-    ax.axvline(5.0, color="grey", ls=":", lw=1)
-    ax.text(5.05, 3, "ensemble depth range 5 m", fontsize=7, color="grey")
+    depth_max = DepthConfig().depth_max
+    ax.axvline(depth_max, color="grey", ls=":", lw=1)
+    ax.text(depth_max + 0.05, 3, f"geometric detectors' depth range {depth_max:g} m", fontsize=7, color="grey")
     ax.set_xlabel("camera distance of the person [m]")
     ax.set_ylabel("recall of walking people [%]")
     ax.set_ylim(0, 103)

@@ -252,3 +252,22 @@ def test_dbscan_does_not_split_an_even_wall_or_a_single_person():
     assert len(dets) == 1 and dets[0].size[1] > 2.9
     person = _column(4.0, 0.0, rng, width=0.6)
     assert len(DBSCANDetector(DBSCANConfig())(person.astype(np.float32))) == 1
+
+
+def test_udepth_height_band_keeps_the_floor_out_of_the_u_map():
+    """In a corridor, the floor's nearest band puts several image rows of every column into
+    one depth bin: a line across the U-depth map that joins both walls into one box as wide as
+    the corridor. With the pipeline's height band (the voxel filter's ground and ceiling
+    heights) the floor stays out of the map: each wall and the person are found apart, the
+    person within 10 cm."""
+    walls = [(np.array([0.5, 1.93, 0.0]), np.array([12.0, 2.13, 3.0])),
+             (np.array([0.5, -2.13, 0.0]), np.array([12.0, -1.93, 3.0]))]
+    depth = render_depth(K, T, walls + [PERSON])
+    band = (VoxelConfig().ground_height, VoxelConfig().ceiling_height)
+    for depth_max in (5.0, 5.5):
+        dcfg = DepthConfig(depth_max=depth_max)
+        unfiltered = UDepthDetector(UDepthConfig(height_filter=False), dcfg, band)(depth, K, T)
+        assert any(d.size[1] > 3.5 for d in unfiltered)  # wall to wall
+        dets = UDepthDetector(UDepthConfig(), dcfg, band)(depth, K, T)
+        assert len(dets) == 3 and all(d.size[1] < 1.0 for d in dets)
+        _check_visible_extent(_match(dets, PERSON)[0], PERSON)

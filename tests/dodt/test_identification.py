@@ -115,3 +115,52 @@ def test_a_young_dynamic_track_is_released_only_after_release_frames_non_candida
     # release_frames = 0 is the reference code's rule: released at the first non-candidate frame
     ref = IdentificationConfig(release_frames=0)
     assert not decide(cand + [False], history, ref)
+
+
+def test_the_old_cloud_cropped_to_matching_reach_gives_the_same_vote():
+    """The tracker votes against the part of the old cloud within match_reach of the points:
+    the nearest neighbours within reach, and so the votes, are the same as against the whole."""
+    from dodt.identification import match_reach
+
+    rng = np.random.default_rng(5)
+    clutter = np.column_stack([rng.uniform(1.0, 5.0, 3000), rng.uniform(-2.0, 2.0, 3000), rng.uniform(0.2, 2.5, 3000)])
+    dt = 0.15
+    for v in (np.zeros(3), np.array([0.0, 1.0, 0.0]), np.array([-0.8, 0.3, 0.0])):
+        then = slab(3.0, 0.2, n=300, width=0.6)
+        now = then + v * dt + rng.normal(0, 0.01, then.shape)
+        cloud = np.vstack([clutter, then])
+        r = match_reach(dt, CFG)
+        lo, hi = now.min(axis=0) - r, now.max(axis=0) + r
+        near = cloud[np.all((cloud >= lo) & (cloud <= hi), axis=1)]
+        assert len(near) < len(cloud)
+        assert vote(now, near, dt, v, T_CAM, K, 5.0, CFG) == vote(now, cKDTree(cloud), dt, v, T_CAM, K, 5.0, CFG)
+
+
+@pytest.mark.parametrize("moving", [False, True])
+def test_a_large_obstacle_votes_with_a_sample_and_decides_as_with_all_its_points(moving):
+    """1200 points vote with an even sample of max_vote_points: a moving slab is a candidate
+    and a standing one (whose filter says it moves) is not, frame by frame as with all points."""
+    from dodt.config import DODTConfig
+    from dodt.detection import Detection
+    from dodt.tracker import Track
+
+    dt = 1 / 30
+    v = np.array([0.0, 1.0, 0.0]) if moving else np.zeros(3)
+    decisions = []
+    for max_points in (0, 200):
+        cfg = DODTConfig(identification=IdentificationConfig(max_vote_points=max_points))
+        clouds, track = {}, None
+        for k in range(12):
+            pts = slab(3.0, 0.0, n=1200, seed=k, width=0.15) + v * k * dt  # a thin slab: neighbours are twins
+            clouds[k] = pts
+            det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.1, source="dbscan", points=pts)
+            if track is None:
+                track = Track(1, det, k, k * dt, cfg)
+            else:
+                track.kf.predict(dt)
+                track.update(det, k, k * dt)
+            track.kf.x[2:4] = [0.0, 1.0]  # past the velocity test, moving or not: the votes decide
+            track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
+        decisions.append(list(track.candidates))
+    assert decisions[0] == decisions[1]
+    assert any(decisions[0]) == moving

@@ -201,8 +201,9 @@ def test_covariance_converges_to_a_steady_state(model):
 
 
 def test_pseudo_measurements_match_the_tracker():
-    """The helper builds the same [x, y, vx, vy, ax, ay] as dodt.tracker.Track.update."""
-    cfg = DODTConfig()
+    """The helper builds the same [x, y, vx, vy, ax, ay] as dodt.tracker.Track.update (the
+    paper's pseudo-measurements: turn compensation off)."""
+    cfg = DODTConfig(kalman=KalmanConfig(turn_window=0.0))
     rng = np.random.default_rng(11)
     times = np.arange(0.0, 1.5, 1.0 / FPS)
 
@@ -317,3 +318,51 @@ def test_position_only_measurement_option_tracks_a_constant_velocity_target():
         kf.update(np.array([1.0 * t, -0.5 * t]) + rng.normal(0, 0.03, 2))
     np.testing.assert_allclose(kf.velocity, [1.0, -0.5], atol=0.15)
     assert kf.Q_for(dt)[0, 0] == pytest.approx(1.0 * dt**5 / 20)
+
+
+# --------------------------------------------------------------------------- turn compensation
+
+
+def _track_walker(path, turn_window: float, seconds: float = 8.0, seed: int = 0) -> float:
+    """Mean velocity error of a track fed noisy detections of a walker after 2 s."""
+    cfg = DODTConfig(kalman=KalmanConfig(turn_window=turn_window))
+    rng = np.random.default_rng(seed)
+    times = np.arange(0.0, seconds, 1.0 / FPS)
+
+    def det(t):
+        p, _ = path(t)
+        c = np.array([p[0], p[1], 0.9]) + np.r_[rng.normal(0, NOISE, 2), 0.0]
+        return Detection(center=c, size=np.array([0.5, 0.5, 1.7]), source="dbscan")
+
+    track = Track(1, det(0.0), 0, 0.0, cfg)
+    errors = []
+    for k, t in enumerate(times[1:], start=1):
+        track.kf.predict(t - times[k - 1])
+        track.update(det(t), k, t)
+        if t >= 2.0:
+            errors.append(np.linalg.norm(track.kf.velocity - path(t)[1]))
+    return float(np.mean(errors))
+
+
+def _circle(t, r=1.0, speed=1.0):
+    w = speed / r
+    return (np.array([r * np.cos(w * t), r * np.sin(w * t)]),
+            np.array([-speed * np.sin(w * t), speed * np.cos(w * t)]))
+
+
+def _swaying_line(t, speed=1.0, sway=0.03, period=1.1):
+    """Straight walk with the body swaying sideways at the gait period."""
+    w = 2 * np.pi / period
+    return (np.array([speed * t, sway * np.sin(w * t)]), np.array([speed, sway * w * np.cos(w * t)]))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_turn_compensation_removes_the_lag_on_a_circle_and_leaves_straight_walks_alone(seed):
+    """On a circle (1 m radius at 1 m/s, as in the circles scenario) the 10-frame difference
+    points 1/6 rad behind; rotated forward by the sustained turn rate, the filtered velocity
+    error falls by a quarter or more (0.18-0.19 -> 0.10-0.12 m/s here). On a straight walk with
+    gait sway it stays within 5 % (1-3 % worse here)."""
+    lagging, compensated = _track_walker(_circle, 0.0, seed=seed), _track_walker(_circle, 1.0, seed=seed)
+    assert compensated < 0.75 * lagging, (lagging, compensated)
+    straight, straight_comp = _track_walker(_swaying_line, 0.0, seed=seed), _track_walker(_swaying_line, 1.0, seed=seed)
+    assert straight_comp < 1.05 * straight, (straight, straight_comp)
