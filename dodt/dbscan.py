@@ -181,58 +181,111 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
     return _dbscan_kernel(pts, float(eps), int(min_points))
 
 
-def split_at_valleys(points: np.ndarray, cfg: DBSCANConfig, depth: int = 0) -> list[np.ndarray]:
-    """Index arrays of the parts of one cluster, cut at sparse slices (see DBSCANConfig.split_width).
-
-    The long axis is the principal axis of the horizontal coordinates. Slices of ``split_bin``
-    along it are counted; a slice is a valley when its count is at most ``split_valley_ratio``
-    of the highest slice on each side of it, and each side is at least ``split_min_part`` long and
-    has ``min_points`` points. The cluster is cut at its deepest valley, and each part again; the
-    valley's own points belong to neither part.
-    """
-    idx = np.arange(len(points))
-    xy = points[:, :2].astype(np.float64)
-    ext = xy.max(axis=0) - xy.min(axis=0) if len(xy) else np.zeros(2)
-    if cfg.split_width <= 0 or len(points) < 2 * cfg.min_points or np.hypot(*ext) <= cfg.split_width or depth > 4:
-        return [idx]
-    c = xy - xy.mean(axis=0)
-    s = c @ np.linalg.eigh(c.T @ c)[1][:, 1]  # along the long axis (the larger eigenvalue's vector)
-    if s.max() - s.min() <= cfg.split_width:
-        return [idx]
+@njit(cache=True, nogil=True)
+def _valley_split(xy, idx, split_width, split_bin, valley_ratio, min_bins, min_points):
+    """One cut of the points xy[idx] at their deepest valley: (left, right) index arrays, or two
+    empty arrays when there is none (see split_parts)."""
+    n = idx.shape[0]
+    none = (idx[:0], idx[:0])
+    mx, my = 0.0, 0.0
+    for i in range(n):
+        mx += xy[idx[i], 0]
+        my += xy[idx[i], 1]
+    mx /= n
+    my /= n
+    c = np.empty((n, 2))
+    for i in range(n):
+        c[i, 0] = xy[idx[i], 0] - mx
+        c[i, 1] = xy[idx[i], 1] - my
+    axis = np.linalg.eigh(c.T @ c)[1][:, 1]  # the long axis: the larger eigenvalue's vector
+    s = c @ axis
+    s_min, s_max = s.min(), s.max()
+    if s_max - s_min <= split_width:
+        return none
     # Each point counts for the two nearest slice centres in proportion to its nearness (linear
     # binning): voxel centroids lie near a 0.1 m lattice, and hard slices of the same width would
     # count 0, 2, 0, 2 ... rows along an axis-aligned obstacle.
-    t = (s - s.min()) / cfg.split_bin
-    k0 = np.floor(t).astype(np.int64)
-    f = t - k0
-    n_bins = int(k0.max()) + 2
-    counts = np.bincount(k0, 1 - f, minlength=n_bins) + np.bincount(k0 + 1, f, minlength=n_bins)
-    left_peak = np.maximum.accumulate(counts)
-    right_peak = np.maximum.accumulate(counts[::-1])[::-1]
-    left_n = np.cumsum(counts)  # points up to each slice centre, about
-    min_bins = int(np.ceil(cfg.split_min_part / cfg.split_bin))
-    k = np.arange(min_bins, n_bins - min_bins)
-    if k.size == 0:
-        return [idx]
-    peak = np.minimum(left_peak[k - 1], right_peak[k + 1])
-    ok = (peak > 0) & (left_n[k - 1] >= cfg.min_points) & (len(s) - left_n[k] >= cfg.min_points)
-    ratio = np.where(ok, counts[k] / np.where(peak > 0, peak, 1.0), np.inf)
-    if ratio.min() > cfg.split_valley_ratio:
-        return [idx]
-    j = int(np.argmin(ratio))  # the deepest valley, the first of equals
-    best, floor = int(k[j]), cfg.split_valley_ratio * peak[j]
+    t = (s - s_min) / split_bin
+    n_bins = int(np.floor(t.max())) + 2
+    counts = np.zeros(n_bins)
+    for i in range(n):
+        k0 = int(np.floor(t[i]))
+        f = t[i] - k0
+        counts[k0] += 1 - f
+        counts[k0 + 1] += f
+    left_peak = np.empty(n_bins)
+    right_peak = np.empty(n_bins)
+    left_n = np.empty(n_bins)  # points up to each slice centre, about
+    run, acc = 0.0, 0.0
+    for k in range(n_bins):
+        run = max(run, counts[k])
+        acc += counts[k]
+        left_peak[k] = run
+        left_n[k] = acc
+    run = 0.0
+    for k in range(n_bins - 1, -1, -1):
+        run = max(run, counts[k])
+        right_peak[k] = run
+    best, best_ratio, best_peak = -1, np.inf, 0.0
+    for k in range(min_bins, n_bins - min_bins):
+        peak = min(left_peak[k - 1], right_peak[k + 1])
+        if peak > 0 and left_n[k - 1] >= min_points and n - left_n[k] >= min_points:
+            r = counts[k] / peak
+            if r < best_ratio:  # the deepest valley, the first of equals
+                best, best_ratio, best_peak = k, r, peak
+    if best < 0 or best_ratio > valley_ratio:
+        return none
     # The valley is the run of slices around the deepest one that stay below the ratio; its points
     # (an arm or a thin link between the two) go to neither part, so the boxes do not reach across.
+    floor = valley_ratio * best_peak
     lo = hi = best
     while lo - 1 >= 0 and counts[lo - 1] <= floor:
         lo -= 1
     while hi + 1 < n_bins and counts[hi + 1] <= floor:
         hi += 1
-    parts = []
-    for side in (t < lo - 0.5, t >= hi + 0.5):
-        sub = idx[side]
-        parts += [sub[p] for p in split_at_valleys(points[sub], cfg, depth + 1)]
-    return parts
+    return idx[t < lo - 0.5], idx[t >= hi + 0.5]
+
+
+@njit(cache=True, nogil=True)
+def _split_parts(xy, split_width, split_bin, valley_ratio, min_bins, min_points, max_depth):
+    """Part number per point (-1: in a valley), parts numbered depth first, left part first."""
+    n = xy.shape[0]
+    labels = -np.ones(n, np.int64)
+    stack = [(np.arange(n), 0)]
+    part = 0
+    while len(stack) > 0:
+        idx, depth = stack.pop()
+        cut = False
+        if split_width > 0 and idx.shape[0] >= 2 * min_points and depth <= max_depth:
+            ex = xy[idx, 0].max() - xy[idx, 0].min()
+            ey = xy[idx, 1].max() - xy[idx, 1].min()
+            if np.hypot(ex, ey) > split_width:
+                left, right = _valley_split(xy, idx, split_width, split_bin, valley_ratio, min_bins, min_points)
+                if left.shape[0] + right.shape[0] > 0:
+                    stack.append((right, depth + 1))
+                    stack.append((left, depth + 1))
+                    cut = True
+        if not cut:
+            for i in idx:
+                labels[i] = part
+            part += 1
+    return labels
+
+
+def split_parts(points: np.ndarray, cfg: DBSCANConfig) -> list[np.ndarray]:
+    """Index arrays of the parts of one cluster, cut at sparse slices (see DBSCANConfig.split_width).
+
+    The long axis is the principal axis of the horizontal coordinates. Slices of ``split_bin``
+    along it are counted; a slice is a valley when its count is at most ``split_valley_ratio``
+    of the highest slice on each side of it, and each side is at least ``split_min_part`` long and
+    has ``min_points`` points. The cluster is cut at its deepest valley, and each part again (at
+    most 5 levels deep); the valley's own points belong to neither part. Compiled (numba).
+    """
+    xy = np.ascontiguousarray(points[:, :2], dtype=np.float64)
+    labels = _split_parts(xy, float(cfg.split_width), float(cfg.split_bin), float(cfg.split_valley_ratio),
+                          int(np.ceil(cfg.split_min_part / cfg.split_bin)), int(cfg.min_points), 4)
+    n_parts = int(labels.max()) + 1 if len(labels) else 0
+    return [np.flatnonzero(labels == p) for p in range(n_parts)]
 
 
 class DBSCANDetector:
@@ -252,7 +305,7 @@ class DBSCANDetector:
             if e <= s or sl[s] < 0:
                 continue
             cluster = points[order[s:e]]
-            for part in split_at_valleys(cluster, self.cfg):
+            for part in split_parts(cluster, self.cfg):
                 pts = cluster[part]
                 lo, hi = pts.min(axis=0).astype(float), pts.max(axis=0).astype(float)
                 grow = np.maximum(self.cfg.min_size_xy - (hi - lo)[:2], 0.0) / 2

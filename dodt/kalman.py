@@ -30,13 +30,17 @@ class KalmanFilter:
         self.Q = np.diag(q)
         self.R = np.diag(r)
         self.H = np.eye(n)
+        self._F_dt, self._F = None, None  # the last transition matrix, reused at a steady frame rate
 
     def F(self, dt: float) -> np.ndarray:
+        if dt == self._F_dt:
+            return self._F
         F = np.eye(self.n)
         F[0, 2] = F[1, 3] = dt
         if self.ca:
             F[0, 4] = F[1, 5] = 0.5 * dt * dt
             F[2, 4] = F[3, 5] = dt
+        self._F_dt, self._F = dt, F
         return F
 
     def Q_for(self, dt: float) -> np.ndarray:
@@ -83,6 +87,12 @@ class KalmanFilter:
             R[2:4, 2:4] /= w * w
             if self.ca:
                 R[4:6, 4:6] /= w**4
+        if H is self.H:  # H = I: the same formulas without the products by H
+            y = z - self.x
+            K = np.linalg.solve(self.P + R, self.P).T
+            self.x = self.x + K @ y
+            self.P = self.P - K @ self.P
+            return
         y = z - H @ self.x
         S = H @ self.P @ H.T + R
         K = np.linalg.solve(S, H @ self.P).T  # P H^T S^-1 (S symmetric)
