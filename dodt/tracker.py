@@ -162,8 +162,10 @@ class Track:
             # the cloud from k frames back, or the oldest one kept since then
             old = [c for c in self.clouds if cur_seq - cfg.frame_skip <= c[0] < cur_seq]
             votes, valid, skipped = 0, 0, len(cur_pts)
-            # voting only for what moves fast enough to be a candidate at all (saves the work)
-            if old and cfg.method != "velocity" and speed >= cfg.velocity_threshold:
+            # voting only for what moves fast enough to be a candidate at all, and is not wider
+            # than any walking person or pair of people (saves the work; neither can be a candidate)
+            wide = 0 < cfg.max_vote_extent < float(np.hypot(self.det_size[0], self.det_size[1]))
+            if old and cfg.method != "velocity" and speed >= cfg.velocity_threshold and not wide:
                 o_seq, o_t, o_pts = old[0]
                 T_then = poses.get(o_seq)
                 cloud_then = clouds(o_seq) if T_then is not None else None

@@ -164,3 +164,32 @@ def test_a_large_obstacle_votes_with_a_sample_and_decides_as_with_all_its_points
         decisions.append(list(track.candidates))
     assert decisions[0] == decisions[1]
     assert any(decisions[0]) == moving
+
+
+def test_an_obstacle_wider_than_any_walker_is_not_voted_on():
+    """A 3 m wide slab moving at 1 m/s: voted on (max_vote_extent 0) it is a candidate; with the
+    default extent limit it is not voted on and is no candidate, whatever its filter says."""
+    from dodt.config import DODTConfig
+    from dodt.detection import Detection
+    from dodt.tracker import Track
+
+    dt = 1 / 30
+    v = np.array([1.0, 0.0, 0.0])  # along its thin axis: each point's neighbour back then is its twin
+    outcome = {}
+    for limit in (0.0, IdentificationConfig().max_vote_extent):
+        cfg = DODTConfig(identification=IdentificationConfig(max_vote_extent=limit))
+        clouds, track = {}, None
+        for k in range(8):
+            pts = slab(3.0, 0.0, n=400, seed=k, width=3.0)
+            pts[:, 0] = 3.0 + v[0] * k * dt + np.random.default_rng(k).normal(0, 0.005, len(pts))
+            clouds[k] = pts
+            det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="dbscan", points=pts)
+            if track is None:
+                track = Track(1, det, k, k * dt, cfg)
+            else:
+                track.kf.predict(dt)
+                track.update(det, k, k * dt)
+            track.kf.x[2:4] = v[:2]
+            track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
+        outcome[limit] = any(track.candidates)
+    assert outcome == {0.0: True, IdentificationConfig().max_vote_extent: False}
