@@ -136,32 +136,37 @@ def test_the_old_cloud_cropped_to_matching_reach_gives_the_same_vote():
         assert vote(now, near, dt, v, T_CAM, K, 5.0, CFG) == vote(now, cKDTree(cloud), dt, v, T_CAM, K, 5.0, CFG)
 
 
+def _slab_track_candidates(cfg, frame_points, velocity) -> list[bool]:
+    """Feed a track one detection per frame (30 Hz) of the given points, with its filtered
+    velocity held at ``velocity`` (past the velocity test: the votes decide); its candidates."""
+    from dodt.detection import Detection
+    from dodt.tracker import Track
+
+    dt = 1 / 30
+    clouds, track = {}, None
+    for k, pts in enumerate(frame_points):
+        clouds[k] = pts
+        det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="dbscan", points=pts)
+        if track is None:
+            track = Track(1, det, k, k * dt, cfg)
+        else:
+            track.kf.predict(dt)
+            track.update(det, k, k * dt)
+        track.kf.x[2:4] = velocity
+        track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
+    return list(track.candidates)
+
+
 @pytest.mark.parametrize("moving", [False, True])
 def test_a_large_obstacle_votes_with_a_sample_and_decides_as_with_all_its_points(moving):
     """1200 points vote with an even sample of max_vote_points: a moving slab is a candidate
     and a standing one (whose filter says it moves) is not, frame by frame as with all points."""
     from dodt.config import DODTConfig
-    from dodt.detection import Detection
-    from dodt.tracker import Track
 
-    dt = 1 / 30
     v = np.array([0.0, 1.0, 0.0]) if moving else np.zeros(3)
-    decisions = []
-    for max_points in (0, 200):
-        cfg = DODTConfig(identification=IdentificationConfig(max_vote_points=max_points))
-        clouds, track = {}, None
-        for k in range(12):
-            pts = slab(3.0, 0.0, n=1200, seed=k, width=0.15) + v * k * dt  # a thin slab: neighbours are twins
-            clouds[k] = pts
-            det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.1, source="dbscan", points=pts)
-            if track is None:
-                track = Track(1, det, k, k * dt, cfg)
-            else:
-                track.kf.predict(dt)
-                track.update(det, k, k * dt)
-            track.kf.x[2:4] = [0.0, 1.0]  # past the velocity test, moving or not: the votes decide
-            track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
-        decisions.append(list(track.candidates))
+    frames = [slab(3.0, 0.0, n=1200, seed=k, width=0.15) + v * k / 30 for k in range(12)]  # thin: twins are neighbours
+    decisions = [_slab_track_candidates(DODTConfig(identification=IdentificationConfig(max_vote_points=n)),
+                                        frames, [0.0, 1.0]) for n in (0, 200)]
     assert decisions[0] == decisions[1]
     assert any(decisions[0]) == moving
 
@@ -170,26 +175,13 @@ def test_an_obstacle_wider_than_any_walker_is_not_voted_on():
     """A 3 m wide slab moving at 1 m/s: voted on (max_vote_extent 0) it is a candidate; with the
     default extent limit it is not voted on and is no candidate, whatever its filter says."""
     from dodt.config import DODTConfig
-    from dodt.detection import Detection
-    from dodt.tracker import Track
 
-    dt = 1 / 30
-    v = np.array([1.0, 0.0, 0.0])  # along its thin axis: each point's neighbour back then is its twin
-    outcome = {}
-    for limit in (0.0, IdentificationConfig().max_vote_extent):
-        cfg = DODTConfig(identification=IdentificationConfig(max_vote_extent=limit))
-        clouds, track = {}, None
-        for k in range(8):
-            pts = slab(3.0, 0.0, n=400, seed=k, width=3.0)
-            pts[:, 0] = 3.0 + v[0] * k * dt + np.random.default_rng(k).normal(0, 0.005, len(pts))
-            clouds[k] = pts
-            det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="dbscan", points=pts)
-            if track is None:
-                track = Track(1, det, k, k * dt, cfg)
-            else:
-                track.kf.predict(dt)
-                track.update(det, k, k * dt)
-            track.kf.x[2:4] = v[:2]
-            track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
-        outcome[limit] = any(track.candidates)
+    frames = []
+    for k in range(8):  # moving along its thin axis: each point's neighbour back then is its twin
+        pts = slab(3.0, 0.0, n=400, seed=k, width=3.0)
+        pts[:, 0] = 3.0 + k / 30 + np.random.default_rng(k).normal(0, 0.005, len(pts))
+        frames.append(pts)
+    outcome = {limit: any(_slab_track_candidates(DODTConfig(identification=IdentificationConfig(max_vote_extent=limit)),
+                                                 frames, [1.0, 0.0]))
+               for limit in (0.0, IdentificationConfig().max_vote_extent)}
     assert outcome == {0.0: True, IdentificationConfig().max_vote_extent: False}
