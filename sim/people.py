@@ -3,10 +3,11 @@
 A person's path is planned once, at world build, from its behaviour and the seed: a long
 polyline walked at the set speed, slowing down for tight corners and U-turns and speeding up
 again at a walker's acceleration (WalkPath). Position and velocity at any time follow from it
-exactly, which is what ground truth reports: the velocity is the position's rate of change. The body is pybullet_data's
-DeepMimic humanoid (``humanoid/humanoid.urdf``, Y-up, 1.62 m at globalScaling 0.25) posed
-kinematically from the walking clip (``data/motions/humanoid3d_walk.txt``: 38 intervals of
-1/30 s per gait cycle, the root advancing 1.2386 m). The gait phase follows the distance
+exactly, which is what ground truth reports: the velocity is the position's rate of change.
+The body is pybullet_data's DeepMimic humanoid (``humanoid/humanoid.urdf``, Y-up, 1.62 m at
+globalScaling 0.25) posed kinematically from the walking clip
+(``data/motions/humanoid3d_walk.txt``: 38 intervals of 1/30 s per gait cycle, the root
+advancing 1.2386 m). The gait phase follows the distance
 walked, so the feet do not slide whatever the speed, and the body is scaled to the person's
 height (stride scales with it).
 """
@@ -141,10 +142,10 @@ class WalkPath:
     """A polyline walked from ``start_delay`` on at up to ``speed``; standing at its end.
 
     A walker with a start delay starts from standing (one without is walking already when the
-    scenario starts); it slows down before corners (to keep the lateral
-    acceleration at ``TURN_LATERAL_ACCELERATION``; at a U-turn nearly to a stop) and before
-    the end, and speeds up again, all at ``WALK_ACCELERATION``: position and velocity are
-    continuous, as a person's are. The speed profile v(s) is sampled along the path with v^2
+    scenario starts); it slows down before corners (to keep the lateral acceleration at
+    ``TURN_LATERAL_ACCELERATION``; at a U-turn nearly to a stop) and before the end, and
+    speeds up again, all at ``acceleration``: position and velocity are continuous, as a
+    person's are. The speed profile v(s) is sampled along the path with v^2
     piecewise linear in s (constant acceleration in each cell), so distance(t) and velocity(t)
     are exact for it.
     """
