@@ -1,9 +1,16 @@
 """Axis-aligned boxes, 3D IoU, and the camera field-of-view test."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dodt.frames import CameraIntrinsics
+
+
+def wrap_angle(a: float) -> float:
+    """The angle a [rad] brought into [-pi, pi)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 def box_bounds(center: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

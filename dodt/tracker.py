@@ -19,6 +19,7 @@ from dodt.association import TrackView, assign, features, similarity_matrix
 from dodt.config import DODTConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics
+from dodt.geometry import wrap_angle
 from dodt.identification import decide, is_candidate, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
 from dodt.result import TrackedObstacle
@@ -107,8 +108,8 @@ class Track:
         tm, hm = min(self.headings, key=lambda e: abs(e[0] - 0.5 * (t0 + stamp)))
         if not t0 < tm < stamp:
             return v
-        w1 = ((hm - h0 + math.pi) % (2 * math.pi) - math.pi) / (tm - t0)
-        w2 = ((heading - hm + math.pi) % (2 * math.pi) - math.pi) / (stamp - tm)
+        w1 = wrap_angle(hm - h0) / (tm - t0)
+        w2 = wrap_angle(heading - hm) / (stamp - tm)
         if w1 * w2 <= 0:
             return v
         omega = math.copysign(min(abs(w1), abs(w2)), w1)
@@ -172,11 +173,11 @@ class Track:
                 if cloud_then is not None and len(cloud_then) and len(o_pts) and len(cur_pts):
                     dt = cur_t - o_t
                     v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(dt, 1e-6)
-                    # only the part of the old cloud within matching reach of the points can hold
-                    # their nearest neighbours: the same matches, from a much smaller k-d tree
                     voters = cur_pts
                     if 0 < cfg.max_vote_points < len(cur_pts):  # an even sample of a large obstacle
                         voters = cur_pts[::-(-len(cur_pts) // cfg.max_vote_points)]
+                    # only the part of the old cloud within matching reach of the points can hold
+                    # their nearest neighbours: the same matches, from a much smaller k-d tree
                     r = match_reach(dt, cfg)
                     lo, hi = voters.min(axis=0) - r, voters.max(axis=0) + r
                     near = cloud_then[np.all((cloud_then >= lo) & (cloud_then <= hi), axis=1)]

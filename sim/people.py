@@ -159,8 +159,9 @@ class WalkPath:
         seg_len = np.linalg.norm(seg, axis=1)
         self._cum = [0.0] + np.cumsum(seg_len).tolist()
         self._xy = self.points.tolist()
-        self._dir = (seg / np.maximum(seg_len, 1e-12)[:, None]).tolist()
-        self._profile(seg / np.maximum(seg_len, 1e-12)[:, None], seg_len, float(acceleration))
+        dirs = seg / np.maximum(seg_len, 1e-12)[:, None]
+        self._dir = dirs.tolist()
+        self._profile(dirs, seg_len, float(acceleration))
 
     def _profile(self, dirs: np.ndarray, seg_len: np.ndarray, acc: float) -> None:
         """Speed limits at the vertices, a forward (speeding up) and a backward (slowing down)

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dodt.geometry import wrap_angle
 from dodt.learned.layout import INPUT_H, INPUT_W, resize_for_network
 from sim.ground_truth import GroundTruth
 from sim.people import WalkPath, plan_path
@@ -162,10 +163,6 @@ def _rot_y(a: float) -> np.ndarray:
 def _rot_z(a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 def _color(rng, lo=0.05, hi=0.95) -> tuple[float, float, float]:
@@ -359,7 +356,7 @@ def _negative_view(rng, co, obstacles, where: np.ndarray, hfov_half: float):
             continue
         d = where - xy
         dist = np.linalg.norm(d, axis=1)
-        off = np.abs([_wrap(math.atan2(v[1], v[0]) - yaw) for v in d])
+        off = np.abs([wrap_angle(math.atan2(v[1], v[0]) - yaw) for v in d])
         # the tilt can bring a person 15-20 degrees beyond the level field of view; a body is ~0.5 m wide
         if np.all(off > hfov_half + math.radians(20.0) + np.arctan2(0.5, dist)):
             return xy, yaw
@@ -405,7 +402,7 @@ def _views(rng, scenario: Scenario, paths: list[WalkPath], n: int) -> tuple[View
         xy, yaw = pose
         z = float(rng.uniform(*CAMERA_HEIGHT))
         roll, pitch = (float(a) for a in rng.uniform(-MAX_TILT, MAX_TILT, 2))
-        views.append(View(time=t, position=(float(xy[0]), float(xy[1]), z), yaw=float(_wrap(yaw)), pitch=pitch,
+        views.append(View(time=t, position=(float(xy[0]), float(xy[1]), z), yaw=float(wrap_angle(yaw)), pitch=pitch,
                           roll=roll, light=_light(rng), negative=negative))
     return tuple(views)
 
