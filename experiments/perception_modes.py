@@ -70,6 +70,7 @@ class PerceptionModule(Protocol):
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput: ...
 
 
+BOTTOM_EDGE_TOLERANCE = 0.15  # m: a box bottom this close above the lowest height in view is cut by the image
 PERSON_CLEAR_SPEED = 0.4  # m/s: a person-labelled track frees the map only when moving this fast
 
 
@@ -118,9 +119,9 @@ class DODTPerception:
         self.dodt.reset()
         self._on_structure = set()
 
-    def _moving(self, o) -> bool:
+    def _moving(self, o, frame: SensorFrame | None = None) -> bool:
         m = self.moving_rule
-        if m is None or o.age < m.min_age or not m.height[0] <= o.size[2] <= m.height[1]:
+        if m is None or o.age < m.min_age or not self._person_tall(o, frame):
             return False
         if m.measured and o.coasting:
             return False
@@ -134,11 +135,38 @@ class DODTPerception:
             return False
         return True
 
+    def _person_tall(self, o, frame: SensorFrame | None) -> bool:
+        """The rule's height test, for a box cut by the image's lower edge too.
+
+        Near the camera a person's box is only what the vertical field of view shows: at 1 m a camera
+        1.2 m up sees down to 0.57 m, so the box of a person there is about 1.1 m tall, at 0.7 m 0.9 m.
+        On the logs of the 21 failed corridor episodes of seeds 0-39 (dodt), 56-86 % of the tracks on a
+        walking person 0-1.6 m from the drone failed the plain height test. A box that reaches down to the
+        lowest height the camera sees at its near side (``frame``'s pose and intrinsics) is taken to
+        reach the floor: it passes when its top is at least the rule's minimum height.
+        """
+        lo, hi = self.moving_rule.height
+        h = float(o.size[2])
+        if h > hi:
+            return False
+        if h >= lo:
+            return True
+        if frame is None:
+            return False
+        bottom, top = float(o.center[2]) - h / 2, float(o.center[2]) + h / 2
+        T, K = np.asarray(frame.T_world_camera, dtype=float), frame.intrinsics
+        q = T[:3, :3].T @ (np.array([o.center[0], o.center[1], bottom]) - T[:3, 3])  # optical: x right, y down
+        near = q[2] - 0.5 * float(np.hypot(o.size[0], o.size[1]))  # depth of the box's near side
+        if near <= 0.05:
+            return False  # beside or behind the camera: nothing to tell from the image
+        lowest = T[:3, :3] @ np.array([q[0] * near / q[2], (K.height - 1 - K.cy) * near / K.fy, near]) + T[:3, 3]
+        return bottom <= lowest[2] + BOTTOM_EDGE_TOLERANCE and top >= lo
+
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
         r = self.dodt.process(frame)
         preds, boxes = [], []
         for o in r.obstacles:
-            if not (o.dynamic or self._moving(o)):
+            if not (o.dynamic or self._moving(o, frame)):
                 continue
             preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=o.velocity,
                                             acceleration=o.acceleration, position_std=o.position_std))

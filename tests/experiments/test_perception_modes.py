@@ -84,3 +84,40 @@ def test_moving_track_rule_drops_a_track_once_seen_on_long_held_structure():
     assert not p._moving(_track(coasting=False))
     share["v"] = 0.0
     assert not p._moving(_track(coasting=True)) and not p._moving(_track(coasting=False))
+
+
+def _camera_frame():
+    """The camera of _truth (at (0, 0, 1.2), looking along +x) as a frame's pose and intrinsics."""
+    return SimpleNamespace(T_world_camera=_truth(0.0, []).T_world_camera, intrinsics=CameraIntrinsics())
+
+
+def _cut_person(distance, bottom_raise=0.0):
+    """A track on a person whose near side is `distance` ahead of the camera, its box from the lowest
+    height in view there (plus bottom_raise) up to 1.65 m."""
+    from dodt.result import TrackedObstacle
+    k = CameraIntrinsics()
+    low = max(1.2 - distance * (k.height - 1 - k.cy) / k.fy, 0.0) + bottom_raise
+    return TrackedObstacle(id=8, center=np.array([distance + 0.15, 0.0, (low + 1.65) / 2]),
+                           size=np.array([0.3, 0.5, 1.65 - low]), velocity=np.array([-0.9, 0.0, 0.0]),
+                           acceleration=np.zeros(3), dynamic=False, coasting=False, age=1.0, history=np.zeros((0, 4)))
+
+
+@pytest.mark.parametrize("distance", [0.6, 0.7, 0.8])
+def test_moving_track_rule_passes_a_near_person_cut_by_the_image_bottom(distance):
+    """Within a metre the camera sees a person from 0.6-0.8 m up only: the box is under the rule's 1 m but
+    reaches the image's lower edge, so it is a person's (without the frame it fails the plain test). A box
+    of the same top whose bottom is 0.3 m above that edge is not."""
+    from experiments.perception_modes import MovingTrackRule
+    p, frame = _rule_only(MovingTrackRule(measured=False)), _camera_frame()
+    track = _cut_person(distance)
+    assert track.size[2] < MovingTrackRule().height[0]
+    assert p._moving(track, frame) and not p._moving(track)
+    assert not p._moving(_cut_person(distance, bottom_raise=0.3), frame)
+
+
+def test_moving_track_rule_height_test_is_unchanged_for_whole_boxes():
+    from experiments.perception_modes import MovingTrackRule
+    p, frame = _rule_only(MovingTrackRule(measured=False)), _camera_frame()
+    assert p._moving(_track(coasting=False), frame)  # 1.7 m tall, 3 m ahead
+    assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 0.6)), frame)  # a short box 3 m ahead, floor in view
+    assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 2.6)), frame)  # taller than a person
