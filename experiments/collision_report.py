@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dodt.geometry import wrap_angle
 from experiments.episode_log import read_log
 
 HALF_FOV = math.radians(43.5)  # the D435's horizontal half field of view at 640x480 (sim/camera)
@@ -45,7 +46,7 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                 centre = _centre(person)[:2]
                 fwd = np.asarray(f["R"], float).reshape(3, 3)[:2, 0]  # body x: the camera's heading
                 d = centre - np.asarray(f["p"], float)[:2]
-                bearing = abs((math.atan2(d[1], d[0]) - math.atan2(fwd[1], fwd[0]) + math.pi) % (2 * math.pi) - math.pi)
+                bearing = abs(wrap_angle(math.atan2(d[1], d[0]) - math.atan2(fwd[1], fwd[0])))
                 seen.append(bearing <= half_fov and float(np.hypot(*d)) <= view_range)
                 near = [tr for tr in f["tracks"] if float(np.hypot(*(np.asarray(tr["center"][:2]) - centre))) <= match]
                 tracked.append(bool(near))

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dodt.geometry import wrap_angle
 from experiments.episode_log import EpisodeLog, r4
 from experiments.episode_metrics import summarize
 from experiments.perception_modes import PerceptionModule, bearing_and_distance, horizontal_view, make_perception
@@ -250,7 +251,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
         if want is None:
             d = traj.sample(t + 1.0)[0][:2] - st.position[:2]
             want = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else yaw
-        err = (want - yaw + math.pi) % (2 * math.pi) - math.pi
+        err = wrap_angle(want - yaw)
         step = cfg.max_yaw_rate * control_dt
         yaw_rate = float(np.clip(err, -step, step)) / control_dt
         yaw = yaw + yaw_rate * control_dt

@@ -26,6 +26,7 @@ from typing import Protocol
 import numpy as np
 
 from dodt.frames import SensorFrame
+from dodt.geometry import wrap_angle
 from dodt.pipeline import DODT
 from dodt.presets import PRESETS, preset
 from planner.types import ObstaclePrediction
@@ -48,7 +49,7 @@ def bearing_and_distance(cam: np.ndarray, heading: float, xy) -> tuple[float, fl
     """|angle| between the heading and the direction from the camera to a world point (x, y), and the
     horizontal distance to it."""
     d = np.asarray(xy, dtype=float)[:2] - cam[:2]
-    return abs((math.atan2(d[1], d[0]) - heading + math.pi) % (2 * math.pi) - math.pi), float(np.hypot(*d))
+    return abs(wrap_angle(math.atan2(d[1], d[0]) - heading)), float(np.hypot(*d))
 
 
 @dataclass(frozen=True, eq=False)
