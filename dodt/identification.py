@@ -12,7 +12,9 @@ Per track and frame, a candidate test:
 3. candidate if votes / valid points >= T_ratio.
 A track is dynamic once the last ``consistency`` frames were candidates, and stays dynamic while
 at least ``force_dynamic_count`` of the last ``force_dynamic_window`` frames were dynamic. A
-track flagged a person by a learned detector is dynamic at once.
+track flagged a person by a learned detector is dynamic at once, for as long as the flag lasts:
+the flag does not enter the candidates or that history (ours), so it cannot lock a standing
+obstacle dynamic.
 """
 from __future__ import annotations
 

@@ -64,6 +64,7 @@ class Track:
         self.candidates: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic_history: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic = False
+        self.geometric_dynamic = False  # the label from speed and point voting alone
         # A person box from the learned detector makes the track a person (dynamic at once) only
         # when it recurs: person_min of the last person_window matched detections (ours; a
         # single false box would otherwise label a static obstacle dynamic for good).
@@ -152,40 +153,44 @@ class Track:
     def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float) -> None:
         """clouds(seq) -> that frame's whole filtered cloud, or None."""
         cfg = self.cfg.identification
-        if self.is_person:
-            cand = True
-        elif self.coasting:
-            self.dynamic_history.append(self.dynamic)
-            return  # no new points: the label stays
-        else:
-            speed = float(np.linalg.norm(self.kf.velocity))
-            cur_seq, cur_t, cur_pts = self.clouds[-1]
-            # the cloud from k frames back, or the oldest one kept since then
-            old = [c for c in self.clouds if cur_seq - cfg.frame_skip <= c[0] < cur_seq]
-            votes, valid, skipped = 0, 0, len(cur_pts)
-            # voting only for what moves fast enough to be a candidate at all, and is not wider
-            # than any walking person or pair of people (saves the work; neither can be a candidate)
-            wide = 0 < cfg.max_vote_extent < float(np.hypot(self.det_size[0], self.det_size[1]))
-            if old and cfg.method != "velocity" and speed >= cfg.velocity_threshold and not wide:
-                o_seq, o_t, o_pts = old[0]
-                T_then = poses.get(o_seq)
-                cloud_then = clouds(o_seq) if T_then is not None else None
-                if cloud_then is not None and len(cloud_then) and len(o_pts) and len(cur_pts):
-                    dt = cur_t - o_t
-                    v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(dt, 1e-6)
-                    voters = cur_pts
-                    if 0 < cfg.max_vote_points < len(cur_pts):  # an even sample of a large obstacle
-                        voters = cur_pts[::-(-len(cur_pts) // cfg.max_vote_points)]
-                    # only the part of the old cloud within matching reach of the points can hold
-                    # their nearest neighbours: the same matches, from a much smaller k-d tree
-                    r = match_reach(dt, cfg)
-                    lo, hi = voters.min(axis=0) - r, voters.max(axis=0) + r
-                    near = cloud_then[np.all((cloud_then >= lo) & (cloud_then <= hi), axis=1)]
-                    votes, valid, skipped = vote(voters, near, dt, v_box, T_then, K, max_depth, cfg)
-            cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
+        if self.coasting:
+            self.dynamic_history.append(self.geometric_dynamic)
+            self.dynamic = bool(self.is_person or self.geometric_dynamic)
+            return  # no new points: the labels stay
+        speed = float(np.linalg.norm(self.kf.velocity))
+        cur_seq, cur_t, cur_pts = self.clouds[-1]
+        # the cloud from k frames back, or the oldest one kept since then
+        old = [c for c in self.clouds if cur_seq - cfg.frame_skip <= c[0] < cur_seq]
+        votes, valid, skipped = 0, 0, len(cur_pts)
+        # voting only for what moves fast enough to be a candidate at all, and is not wider
+        # than any walking person or pair of people (saves the work; neither can be a candidate)
+        wide = 0 < cfg.max_vote_extent < float(np.hypot(self.det_size[0], self.det_size[1]))
+        if old and cfg.method != "velocity" and speed >= cfg.velocity_threshold and not wide:
+            o_seq, o_t, o_pts = old[0]
+            T_then = poses.get(o_seq)
+            cloud_then = clouds(o_seq) if T_then is not None else None
+            if cloud_then is not None and len(cloud_then) and len(o_pts) and len(cur_pts):
+                dt = cur_t - o_t
+                v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(dt, 1e-6)
+                voters = cur_pts
+                if 0 < cfg.max_vote_points < len(cur_pts):  # an even sample of a large obstacle
+                    voters = cur_pts[::-(-len(cur_pts) // cfg.max_vote_points)]
+                # only the part of the old cloud within matching reach of the points can hold
+                # their nearest neighbours: the same matches, from a much smaller k-d tree
+                r = match_reach(dt, cfg)
+                lo, hi = voters.min(axis=0) - r, voters.max(axis=0) + r
+                near = cloud_then[np.all((cloud_then >= lo) & (cloud_then <= hi), axis=1)]
+                votes, valid, skipped = vote(voters, near, dt, v_box, T_then, K, max_depth, cfg)
+        cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
         self.candidates.append(cand)
-        self.dynamic = bool(self.is_person or decide(list(self.candidates), list(self.dynamic_history), cfg))
-        self.dynamic_history.append(self.dynamic)
+        # The geometric label (candidates, consistency, the hysteresis and the force-dynamic lock)
+        # sees only the geometric evidence; the person label adds to it and does not feed it. Fed
+        # into it, ten person frames locked a static obstacle dynamic for good (force_dynamic):
+        # on circles a 3 m tall obstacle 5 m away, mutual best match of a passing person's box
+        # for a while, stayed dynamic for 8 s after its last person box.
+        self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg)
+        self.dynamic_history.append(self.geometric_dynamic)
+        self.dynamic = bool(self.is_person or self.geometric_dynamic)
 
     def output(self, stamp: float) -> TrackedObstacle:
         h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
@@ -216,16 +221,24 @@ class Tracker:
     def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> int:
         """Delete coasting tracks whose predicted place is in view and seen through: the camera
         sees clearly farther than where the obstacle should be, so it is not there (it is
-        occluded when something nearer is seen, and then it keeps coasting). Returns how many."""
+        occluded when something nearer is seen, and then it keeps coasting). Returns how many.
+
+        Within the depth range of the point cloud (``depth.depth_max``) for every track; with the
+        learned module on, person tracks out to its range (``learned.depth_max``), where its
+        boxes are the only detections. Beyond ``depth.depth_max`` the margin grows with the
+        square of the depth, as stereo depth noise does."""
         tc, dc = self.cfg.track, self.cfg.depth
         R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
         keep, dropped = [], 0
         H, W = depth_m.shape
+        person_reach = self.cfg.learned.depth_max if self.cfg.learned.enabled else dc.depth_max
         for tr in self.tracks:
             if tr.coasting and tr.missed >= tc.seen_through_after:
                 c = np.array([*tr.center_xy, tr.z]) - t
                 pc = c @ R
-                if dc.depth_min <= pc[2] <= dc.depth_max:
+                reach = max(person_reach, dc.depth_max) if tr.is_person else dc.depth_max
+                if dc.depth_min <= pc[2] <= reach:
+                    margin = tc.seen_through_margin * max(1.0, (pc[2] / dc.depth_max) ** 2)
                     half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
                     half_h = 0.5 * tr.size[2] * K.fy / pc[2]
                     u = K.fx * pc[0] / pc[2] + K.cx
@@ -237,7 +250,7 @@ class Tracker:
                         win = depth_m[v0:v1 + 1:2, u0:u1 + 1:2]
                         win = win[win > 0]
                         # seen through: nearly everything in the box's image region lies behind it
-                        if win.size >= 20 and np.mean(win > pc[2] + tc.seen_through_margin) > tc.seen_through_fraction:
+                        if win.size >= 20 and np.mean(win > pc[2] + margin) > tc.seen_through_fraction:
                             dropped += 1
                             continue
             keep.append(tr)
@@ -277,6 +290,8 @@ class Tracker:
             if i not in matched_t:
                 if stamp - tr.last_seen > self.cfg.track.coast_time:
                     continue  # lost for too long
+                if tr.is_person and float(np.linalg.norm(tr.kf.velocity)) > self.cfg.track.max_coast_speed:
+                    continue  # a person faster than people walk: a velocity made of noise
                 tr.coasting = True
                 tr.missed += 1
             survivors.append(tr)

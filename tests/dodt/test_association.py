@@ -230,8 +230,10 @@ class Feed:
         self.k = 0
         self.rng = np.random.default_rng(seed)
 
-    def __call__(self, stamp: float, centers) -> list:
+    def __call__(self, stamp: float, centers, person: bool = False) -> list:
         dets = [det(c, seed=int(self.rng.integers(1 << 30))) for c in centers]
+        for d in dets:
+            d.is_person = person  # as the learned detector marks its boxes
         if self.last is not None:
             self.tracker.predict(stamp - self.last)
         pairs = self.tracker.associate(dets, CAMERA)
@@ -312,6 +314,27 @@ def test_track_is_dropped_after_the_coast_time(name):
     assert [o.id for o in out] == [2]
 
 
+def test_a_person_track_faster_than_people_walk_is_dropped_not_coasted():
+    """A young person track whose boxes stepped 0.25 m a frame (a far lifted box's depth jitter)
+    has a filtered speed of several m/s: missing its box, it is dropped at once. The same boxes
+    without the person label, and a person walking at 1 m/s, coast."""
+    cfg = DODTConfig()
+    outcome = {}
+    for person in (True, False):
+        fast = Feed(cfg)
+        for k, x in enumerate((6.0, 6.25, 6.5)):
+            fast(k / FPS, [np.array([x, 0.0, 0.9])], person=person)
+        assert np.linalg.norm(fast.tracker.tracks[0].kf.velocity) > cfg.track.max_coast_speed
+        assert fast.tracker.tracks[0].is_person == person
+        outcome[person] = [o.coasting for o in fast(3 / FPS, [])]
+    assert outcome == {True: [], False: [True]}
+    slow = Feed(cfg)
+    for k in range(30):
+        slow(k / FPS, [walker(k / FPS)], person=True)
+    out = slow(30 / FPS, [])
+    assert len(out) == 1 and out[0].coasting
+
+
 def test_a_box_appearing_elsewhere_starts_a_new_track_while_the_old_one_coasts():
     feed = Feed(DODTConfig())
     for k in range(30):
@@ -370,3 +393,31 @@ def test_constant_velocity_target_does_not_overshoot():
         out = feed(t, [walker(t)])
         speeds.append(out[0].velocity[1])
     assert max(speeds) < 1.1
+
+
+@pytest.mark.parametrize("wall_x, learned, dropped", [
+    (10.0, True, True),  # the camera sees the wall 2 m behind where the person should be: not there
+    (7.3, True, False),  # something nearer hides the place: the person may be behind it
+    (10.0, False, False),  # without the learned module nothing is tracked beyond the cloud's range
+])
+def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
+    """A person track 8 m away, beyond the point cloud's 5.5 m but within the learned detector's
+    10 m, loses its boxes. After seen_through_after missed frames it is dropped when the depth
+    image shows clearly farther than it in its image region, and coasts on otherwise."""
+    import dataclasses
+
+    from tests.dodt.synthetic import camera_pose, render_depth
+    from dodt.frames import CameraIntrinsics
+
+    cfg = DODTConfig()
+    cfg = dataclasses.replace(cfg, learned=dataclasses.replace(cfg.learned, enabled=learned))
+    K, T = CameraIntrinsics(), camera_pose(z=1.2)
+    depth = render_depth(K, T, [((wall_x, -3.0, 0.0), (wall_x + 0.2, 3.0, 3.0))])
+    feed = Feed(cfg)
+    for k in range(5):  # standing, so the coasting prediction stays put
+        feed(k / FPS, [np.array([8.0, 0.0, 0.9])], person=True)
+    assert feed.tracker.tracks[0].is_person
+    for k in range(5, 5 + cfg.track.seen_through_after + 1):
+        feed(k / FPS, [])
+        feed.tracker.drop_seen_through(depth, K, T)
+    assert (feed.tracker.tracks == []) == dropped

@@ -185,3 +185,31 @@ def test_an_obstacle_wider_than_any_walker_is_not_voted_on():
                                                  frames, [1.0, 0.0]))
                for limit in (0.0, IdentificationConfig().max_vote_extent)}
     assert outcome == {0.0: True, IdentificationConfig().max_vote_extent: False}
+
+
+def test_a_person_label_does_not_lock_a_standing_obstacle_dynamic():
+    """A standing obstacle that a learned detector called a person for 15 frames is dynamic while
+    the label lasts, and static again two frames after its last person box: the person label does
+    not feed the geometric label's force-dynamic lock (10 dynamic frames of the last 30)."""
+    from dodt.config import DODTConfig
+    from dodt.detection import Detection
+    from dodt.tracker import Track
+
+    cfg = DODTConfig()
+    dt = 1 / 30
+    clouds, track, labels = {}, None, []
+    for k in range(40):
+        pts = slab(3.0, 0.0, n=300, seed=k)
+        clouds[k] = pts
+        det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="dbscan", points=pts)
+        det.is_person = k < 15
+        if track is None:
+            track = Track(1, det, k, k * dt, cfg)
+        else:
+            track.kf.predict(dt)
+            track.update(det, k, k * dt)
+        track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
+        labels.append(track.dynamic)
+    assert all(labels[1:15])  # 2 of the last 3 boxes were person boxes: dynamic at once
+    assert not any(labels[16:])  # 2 of the last 3 were not
+    assert not track.geometric_dynamic
