@@ -8,7 +8,8 @@ step 2), and the module the pipeline calls.
   from the camera: there the depth is too sparse for the geometric detectors, which is what the
   module is for; closer, the geometric detectors should have seen it, and it is taken for a
   learned detector's mistake. Ours: also dropped when it lies within ``duplicate_gate`` of a
-  fused box, a second, misplaced view of an obstacle already there.
+  fused box or of a learned box added before it, a second, misplaced view of an obstacle
+  already there.
 - A learned box that overlaps fused boxes without being a mutual best match is dropped.
 """
 from __future__ import annotations
@@ -48,7 +49,9 @@ def fuse_learned(fused: list[Detection], learned: list[Detection], camera: np.nd
         overlaps = iou.shape[1] > 0 and bool(np.any(iou[i] > 0))
         if overlaps or np.linalg.norm(d.center - camera) < cfg.overwrite_distance:
             continue
-        if fused and min(_gap_xy(d.center, f) for f in fused) < cfg.duplicate_gate:
+        # against the fused boxes and the learned boxes added before it (best score first: two
+        # 2D boxes of one far person that both passed NMS lift to nearly the same place)
+        if min((_gap_xy(d.center, f) for f in out), default=np.inf) < cfg.duplicate_gate:
             continue
         out.append(d)
     return out

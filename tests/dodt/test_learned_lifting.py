@@ -127,6 +127,14 @@ def test_fusion_drops_an_unmatched_box_right_beside_a_fused_one():
     assert fuse_learned(fused, [beside], np.zeros(3), LearnedConfig(duplicate_gate=0.0))[1:] == [beside]
 
 
+def test_fusion_adds_one_box_per_far_person_when_two_views_of_them_survive_nms():
+    first = _box((7.0, 0.0, 0.9), (0.5, 0.5, 1.8), True, "learned")  # the better-scored 2D box
+    second = _box((7.3, 0.1, 0.9), (0.5, 0.5, 1.8), True, "learned")  # the same person, lifted again
+    other = _box((7.0, 1.5, 0.9), (0.5, 0.5, 1.8), True, "learned")  # a second person beside them
+    assert fuse_learned([], [first, second, other], np.zeros(3), CFG) == [first, other]
+    assert fuse_learned([], [first, second], np.zeros(3), LearnedConfig(duplicate_gate=0.0)) == [first, second]
+
+
 def test_fusion_overlap_without_mutual_best_match_is_dropped():
     fused = [_box((5, 0, 0.85))]
     a = _box((5.05, 0, 0.9), (0.5, 0.5, 1.8), True, "learned")  # the fused box's best match
