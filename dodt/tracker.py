@@ -63,7 +63,6 @@ class Track:
         self.history.append((stamp, float(det.center[0]), float(det.center[1]), self.z))
         self.candidates: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
         self.dynamic_history: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
-        self.dynamic = False
         self.geometric_dynamic = False  # the label from speed and point voting alone
         # A person box from the learned detector makes the track a person (dynamic at once) only
         # when it recurs: person_min of the last person_window matched detections (ours; a
@@ -76,6 +75,11 @@ class Track:
     @property
     def is_person(self) -> bool:
         return sum(self.person_votes) >= self.cfg.learned.person_min
+
+    @property
+    def dynamic(self) -> bool:
+        """A person (dynamic at once, while the label lasts) or dynamic by speed and voting."""
+        return bool(self.is_person or self.geometric_dynamic)
 
     @property
     def center_xy(self) -> np.ndarray:
@@ -155,8 +159,7 @@ class Track:
         cfg = self.cfg.identification
         if self.coasting:
             self.dynamic_history.append(self.geometric_dynamic)
-            self.dynamic = bool(self.is_person or self.geometric_dynamic)
-            return  # no new points: the labels stay
+            return  # no new points: the label stays
         speed = float(np.linalg.norm(self.kf.velocity))
         cur_seq, cur_t, cur_pts = self.clouds[-1]
         # the cloud from k frames back, or the oldest one kept since then
@@ -190,7 +193,6 @@ class Track:
         # for a while, stayed dynamic for 8 s after its last person box.
         self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg)
         self.dynamic_history.append(self.geometric_dynamic)
-        self.dynamic = bool(self.is_person or self.geometric_dynamic)
 
     def output(self, stamp: float) -> TrackedObstacle:
         h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
@@ -231,12 +233,12 @@ class Tracker:
         R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
         keep, dropped = [], 0
         H, W = depth_m.shape
-        person_reach = self.cfg.learned.depth_max if self.cfg.learned.enabled else dc.depth_max
+        person_reach = max(self.cfg.learned.depth_max, dc.depth_max) if self.cfg.learned.enabled else dc.depth_max
         for tr in self.tracks:
             if tr.coasting and tr.missed >= tc.seen_through_after:
                 c = np.array([*tr.center_xy, tr.z]) - t
                 pc = c @ R
-                reach = max(person_reach, dc.depth_max) if tr.is_person else dc.depth_max
+                reach = person_reach if tr.is_person else dc.depth_max
                 if dc.depth_min <= pc[2] <= reach:
                     margin = tc.seen_through_margin * max(1.0, (pc[2] / dc.depth_max) ** 2)
                     half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
