@@ -108,7 +108,8 @@ def _cmd_run(args) -> int:
         viewer = LiveViewer(corridor=sc.corridor, goal=sc.drone.goal)
     try:
         s = run_episode(sc, seed=args.seed, perception=args.perception, out=out,
-                        cfg=EpisodeConfig(duration=args.duration), renderer=args.renderer, on_frame=viewer)
+                        cfg=EpisodeConfig(duration=args.duration, static_map=args.map), renderer=args.renderer,
+                        on_frame=viewer)
         if viewer is not None and not args.no_wait and sys.stdin.isatty():
             input("episode finished; press Enter to stop the meshcat viewer ")
     finally:
@@ -191,7 +192,8 @@ def _cmd_sweep(args) -> int:
     try:
         seeds = sweep.parse_seeds(args.seeds)
         agg = sweep.run_sweep(args.scenario, seeds, args.perception, Path(args.out), jobs=args.jobs,
-                              dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet)
+                              dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet,
+                              static_map=args.map)
     except sweep.SweepError as e:
         raise UserError(str(e)) from None
     r = agg["rates"]
@@ -340,6 +342,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--duration", type=float, default=None, help="time limit in seconds (default: the scenario's)")
     r.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
+    r.add_argument("--map", choices=("depth", "truth"), default="depth",
+                   help="static map: depth (built from the camera, default) or truth (the scenario's geometry known "
+                         "from the start; with oracle, oracle-360 or static-only nothing is rendered: a fast planner test)")
     r.add_argument("--viz", choices=("live", "html"), default=None,
                    help="live: stream to a meshcat server on 127.0.0.1; html: write OUT/replay.html")
     r.add_argument("--no-wait", action="store_true", help="live: close the viewer when the episode ends")
@@ -374,6 +379,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
     w.add_argument("--keep-logs", action="store_true", help="keep the episode logs of successful episodes too")
     w.add_argument("--quiet", action="store_true", help="no progress bar")
+    w.add_argument("--map", choices=("depth", "truth"), default="depth",
+                   help="static map: depth (built from the camera, default) or truth (the scenario's geometry known "
+                         "from the start; with oracle, oracle-360 or static-only nothing is rendered: a fast planner test)")
     w.set_defaults(func=_cmd_sweep)
 
     rep = sub.add_parser("reproduce", help="Table I, Table II and the corridor sweeps in one report.md")

@@ -30,7 +30,9 @@ from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
 from planner.voxel_map import MapConfig, VoxelMap
 from sim import World, load_scenario
 from sim.controller import Reference
+from sim.static_grid import static_occupancy
 
+STATIC_MAPS = ("depth", "truth")
 GOAL_TOLERANCE = 0.4  # m: the episode succeeds when the drone is this close to the goal
 CRASH_ALTITUDE = 0.1  # m: below this the drone is on the floor
 
@@ -47,6 +49,11 @@ class EpisodeConfig:
     memory: float = 0.0
     memory_std_growth: float = 0.3  # m/s
     duration: float | None = None  # s; None: the scenario's duration
+    # "depth": the static map is built from the camera's depth frames (the paper's setup); "truth": it holds
+    # the scenario's static geometry from the start and depth is not used (sim.static_grid), which isolates
+    # a planner from the mapping; with a perception mode that needs no images (the oracles, static-only)
+    # nothing is rendered then, and an episode runs several times faster
+    static_map: str = "depth"
 
 
 def map_config_for(scenario, robot_radius: float) -> MapConfig:
@@ -126,13 +133,17 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
     seed = sc.seed if seed is None else int(seed)
     perc = make_perception(perception) if isinstance(perception, str) else perception
+    if cfg.static_map not in STATIC_MAPS:
+        raise ValueError(f"static_map: {cfg.static_map!r} is not one of {', '.join(STATIC_MAPS)}")
     duration = sc.duration if cfg.duration is None else cfg.duration
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
     log = EpisodeLog(None if out is None else out / "log.jsonl.gz")
     t_wall = time.perf_counter()
-    world = World(sc, seed=seed, renderer=renderer, segmentation=False)
+    # images are needed by a depth-built map or by a perception module that looks at them (unknown ones do)
+    render = cfg.static_map == "depth" or bool(getattr(perc, "uses_images", True))
+    world = World(sc, seed=seed, renderer=renderer, segmentation=False, render=render)
     planner = planner if planner is not None else default_planner(world.vehicle.radius)
     try:
         summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame)
@@ -152,13 +163,16 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     perc.reset()
     planner.reset()
     vmap = VoxelMap(map_config_for(sc, world.vehicle.radius))
+    known_map = cfg.static_map == "truth"
+    if known_map:
+        vmap.set_known(static_occupancy(sc, vmap.origin, vmap.dims, vmap.res))
     if hasattr(perc, "structure_test"):  # DODT's moving-track rule checks boxes against the static map
         perc.structure_test = vmap.established_fraction
     goal = np.asarray(sc.drone.goal, dtype=float)
     control_dt = world.dt * world.steps_per_control
     plan_every = max(1, int(round(1.0 / (cfg.plan_rate * control_dt))))
     log.add({"k": "header", "scenario": sc.name, "source": sc.source, "seed": seed, "perception": perc.name,
-             "planner": type(planner).__name__, "duration": duration,
+             "planner": type(planner).__name__, "duration": duration, "static_map": cfg.static_map,
              "rates": {"control": 1.0 / control_dt, "camera": sc.rates.camera, "plan": cfg.plan_rate,
                        "map": sc.rates.camera / cfg.map_every},
              "corridor": {"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
@@ -196,7 +210,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                     obstacles = tuple(obstacles) + tuple(
                         _extrapolate((o,), memory.last[o.id][1], po.stamp)[0] for o in extra)
             map_ms = None
-            if n_frames % cfg.map_every == 0:
+            if not known_map and n_frames % cfg.map_every == 0:
                 depth_m, _ = frame.depth_m_counted()
                 m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera, dynamic_boxes=po.clear_boxes,
                                 stamp=frame.stamp)
@@ -213,7 +227,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                 idx = vmap.occupied_indices()
                 above_floor = idx[:, 2] * vmap.cfg.resolution + vmap.cfg.origin[2] >= 0.1
                 log.add({"k": "map", "t": round(t, 4), "voxels": idx[above_floor].tolist()})
-                next_snapshot = t + cfg.map_snapshot_period
+                next_snapshot = math.inf if known_map else t + cfg.map_snapshot_period  # a known map never changes
             if on_frame is not None:
                 on_frame({"t": t, "frame": frame, "truth": truth, "perception": po, "map": vmap, "trajectory": traj,
                           "T_world_body": q, "path": getattr(planner, "path", None)})

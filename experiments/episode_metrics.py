@@ -48,7 +48,7 @@ def summarize(records: list[dict]) -> dict:
     statuses = [pl["status"] for pl in plans]
     return {
         "scenario": header["scenario"], "seed": header["seed"], "perception": header["perception"],
-        "planner": header.get("planner"),
+        "planner": header.get("planner"), "static_map": header.get("static_map", "depth"),
         "success": reached and not collided,
         "reached_goal": reached, "collided": collided, "collision_count": len(collisions),
         "collisions": [{"t": c["t"], "kind": c["kind"], "other_id": c["other_id"]} for c in collisions],

@@ -4,7 +4,9 @@ A perception module receives each sensor frame (and, only if it declares
 ``uses_ground_truth``, the simulator's truth for that frame) and returns a
 ``PerceptionOutput``: the moving obstacles for the planner and the boxes the static map must
 clear. To plug in another detector, implement ``reset`` and ``update`` and pass an instance to
-``experiments.episode.run_episode(perception=...)``.
+``experiments.episode.run_episode(perception=...)``. A module that declares ``uses_images = False``
+reads no depth or colour; with a known static map (``EpisodeConfig.static_map = "truth"``) the
+simulator then renders nothing (a module without the attribute is taken to need images).
 
 Modes:
 - ``dodt`` (and any DODT preset name, e.g. ``dodt-no-coast``): our DODT library on the frames.
@@ -65,6 +67,7 @@ class PerceptionOutput:
 class PerceptionModule(Protocol):
     name: str
     uses_ground_truth: bool
+    uses_images: bool  # False: update() reads no depth or colour (with a known static map nothing is rendered)
 
     def reset(self) -> None: ...
 
@@ -106,6 +109,7 @@ class MovingTrackRule:
 
 class DODTPerception:
     uses_ground_truth = False
+    uses_images = True
 
     def __init__(self, config_name: str = "dodt", learned_detector=None, moving_rule: MovingTrackRule | None = MovingTrackRule()):
         self.name = config_name
@@ -184,6 +188,7 @@ class DODTPerception:
 
 class OraclePerception:
     uses_ground_truth = True
+    uses_images = False
 
     def __init__(self, max_range: float = 5.0, memory: float = 1.0, all_around: bool = False):
         self.max_range = max_range
@@ -225,6 +230,7 @@ class OraclePerception:
 class StaticOnlyPerception:
     name = "static-only"
     uses_ground_truth = False
+    uses_images = False  # the map looks at the depth, not this module
 
     def reset(self) -> None:
         pass

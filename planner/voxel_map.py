@@ -261,6 +261,17 @@ class VoxelMap:
         self._since.fill(0)
         self._updates = 0  # update() calls so far: the clock of the static_after rule
 
+    def set_known(self, occupied: np.ndarray) -> None:
+        """Replace the map by known geometry: voxels where ``occupied`` (nx, ny, nz) bool is True become
+        occupied at the clamp's maximum and count as long established (dynamic regions never free them),
+        the rest free. For planning against a map given beforehand instead of one built from depth."""
+        occ = np.asarray(occupied, dtype=bool)
+        if occ.shape != self.log_odds.shape:
+            raise ValueError(f"VoxelMap.set_known: grid of shape {occ.shape}, the map is {self.log_odds.shape}")
+        self.reset()
+        self.log_odds[...] = np.where(occ, np.float32(self.l_max), np.float32(self.l_min))
+        self._since[...] = -self._static_after if self._static_after < np.iinfo(np.int32).max else 0
+
     # -- update ----------------------------------------------------------------------------------------
     def _region(self, center, size) -> np.ndarray:
         c, s = np.asarray(center, float), np.asarray(size, float)

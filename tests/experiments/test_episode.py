@@ -103,3 +103,25 @@ def test_obstacles_are_extrapolated_to_the_planning_time():
     (moved,) = _extrapolate((o,), stamp=2.0, now=2.5)
     np.testing.assert_allclose(moved.center, [1.5, 0.0, 0.9])
     assert moved.position_std == pytest.approx(o.std_growth * 0.5)
+
+
+def test_known_static_map_renders_nothing_and_holds_the_geometry(tmp_path):
+    """static_map="truth": the map is the scenario's geometry from the start, the oracle needs no images,
+    so nothing is rendered; a DODT episode still renders (it needs the frames)."""
+    sc = make_scenario(CROSSING + '\n[[obstacles]]\nkind = "box"\ncenter = [3.0, 1.2]\nsize = [0.6, 0.6, 1.6]\n')
+    s = run_episode(sc, seed=0, perception="oracle", out=tmp_path, cfg=EpisodeConfig(duration=2.0, static_map="truth"))
+    assert s["timing"]["renderer"] == "none" and s["static_map"] == "truth"
+    recs = read_log(tmp_path / "log.jsonl.gz")
+    assert recs[0]["static_map"] == "truth"
+    maps = [r for r in recs if r["k"] == "map"]
+    assert len(maps) == 1  # a known map never changes: one snapshot
+    vox = np.array(maps[0]["voxels"])
+    centres = recs[0]["map_origin"] + (vox + 0.5) * recs[0]["map_resolution"]
+    in_box = np.all(np.abs(centres[:, :2] - [3.0, 1.2]) < 0.3, axis=1) & (centres[:, 2] < 1.6)
+    assert in_box.sum() >= 25 * 14  # the box's footprint (6 x 6 columns, some halved) up to 1.6 m
+    assert np.any(centres[:, 1] > sc.corridor.width / 2)  # the side wall
+    assert not any(r["map_ms"] for r in recs if r["k"] == "f")  # no depth went into the map
+    d = run_episode(sc, seed=0, perception="dodt", cfg=EpisodeConfig(duration=0.5, static_map="truth"))
+    assert d["timing"]["renderer"] != "none"
+    with pytest.raises(ValueError, match="static_map"):
+        run_episode(sc, seed=0, perception="oracle", cfg=EpisodeConfig(duration=0.5, static_map="lidar"))

@@ -399,6 +399,25 @@ def test_results_of_another_perception_mode_are_refused(scenarios, tmp_path):
         run_sweep(str(scenarios["short"]), [0], "oracle", out, progress=False)
 
 
+def test_results_with_another_static_map_are_refused(scenarios, tmp_path):
+    """A sweep folder of depth-map episodes is not extended with known-map ones (or back), and a known-map
+    sweep records its map in every result (a line from before the option counts as depth)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    line = json.dumps({"scenario": "short", "seed": 0, "perception": "oracle", "success": True})
+    (out / RESULTS).write_text(line + "\n")
+    r = _cli("sweep", str(scenarios["short"]), "--perception", "oracle", "--seeds", "0:2", "--jobs", "1",
+             "--map", "truth", "--out", str(out), "--quiet")
+    assert r.returncode == 2, r.stderr
+    assert "holds results with the 'depth' static map, not 'truth'" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and (out / RESULTS).read_text() == line + "\n"
+    known = tmp_path / "known"
+    run_sweep(str(scenarios["short"]), [0, 1], "oracle", known, progress=False, static_map="truth")
+    assert all(s["static_map"] == "truth" for s in read_results(known / RESULTS).values())
+    with pytest.raises(SweepError, match="static map"):
+        run_sweep(str(scenarios["short"]), [2], "oracle", known, progress=False)
+
+
 def test_bad_scenario_file_exits_2(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[corridor]\nwidth = 0.5\n")

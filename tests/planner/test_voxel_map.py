@@ -310,3 +310,20 @@ def test_established_fraction_counts_long_held_columns_only():
     assert 0.2 <= share <= 0.8  # the face column row, not the free space in front of it
     assert m.established_fraction(np.array([1.0, 0.0, 0.8]), np.array([0.4, 0.4, 1.0])) == 0.0  # free space
     assert m.established_fraction(np.array([np.nan, 0.0, 0.8]), np.array([0.4, 0.4, 1.0])) == 0.0
+
+
+def test_known_geometry_replaces_the_map_and_is_never_cleared():
+    m = VoxelMap(MapConfig(origin=(0.0, 0.0, 0.0), size=(2.0, 2.0, 1.0)))
+    occ = np.zeros(tuple(m.dims), bool)
+    occ[5:8, 5:8, 0:6] = True
+    m.set_known(occ)
+    assert m.occupied_count() == occ.sum()
+    assert m.is_occupied(np.array([[0.65, 0.65, 0.3]]))[0] and m.is_free(np.array([[1.5, 1.5, 0.3]]))[0]
+    assert not m.is_unknown(np.array([[1.5, 1.5, 0.3]]))[0]
+    # known voxels count as established: a dynamic box over them frees nothing
+    m.update(np.zeros((16, 16), np.float32), CameraIntrinsics(16, 16, 8.0, 8.0, 8.0, 8.0),
+             np.eye(4), dynamic_boxes=[(np.array([0.65, 0.65, 0.3]), np.array([0.4, 0.4, 0.6]))])
+    assert m.is_occupied(np.array([[0.65, 0.65, 0.3]]))[0]
+    assert m.established_fraction(np.array([0.65, 0.65, 0.3]), np.array([0.3, 0.3, 0.6])) == 1.0
+    with pytest.raises(ValueError, match="set_known"):
+        m.set_known(np.zeros((3, 3, 3), bool))

@@ -182,3 +182,26 @@ def test_one_world_at_a_time_renders_with_egl_and_closing_it_is_safe():
     c = World(make_scenario(BOX_SCENE), seed=0, renderer="egl")  # EGL is free again
     assert c.renderer == "egl"
     c.close()
+
+
+def test_render_off_keeps_the_camera_clock_and_the_ground_truth():
+    """World(render=False): a frame every camera period with the pose and no returns, truth still moving."""
+    sc = make_scenario('[[people]]\nbehaviour = "crossing"\nspeed = 1.0\nwaypoints = [[5.0, 1.5], [5.0, -1.5]]\n')
+    with World(sc, seed=0, render=False) as w:
+        assert w.renderer == "none"
+        frames, truths = [], []
+        for _ in range(60):  # 0.5 s at the 120 Hz control rate
+            f = w.step()
+            if f is not None:
+                frames.append(f)
+                truths.append(w.ground_truth())
+        assert len(frames) == 15  # 30 Hz
+        assert all(not f.depth.any() and f.color is None and f.depth.shape == (sc.camera.height, sc.camera.width)
+                   for f in frames)
+        assert [f.stamp for f in frames] == [t.stamp for t in truths]
+        np.testing.assert_allclose(frames[-1].T_world_camera, truths[-1].T_world_camera)
+        centres = np.array([[o for o in t.obstacles if o.kind == "person"][0].center[:2] for t in truths])
+        path = np.array([w.walkers[0].path.position(t.stamp) for t in truths])[:, :2]
+        assert np.max(np.linalg.norm(centres - path, axis=1)) < 0.25  # the body's box follows the walk (gait sway)
+        assert path[0, 1] - path[-1, 1] == pytest.approx(14 / 30, abs=0.02)  # 1 m/s over 14 frame periods
+        assert truths[-1].segmentation is None
