@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 from numba import njit
+from scipy.ndimage import distance_transform_edt
 
 _SQRT2 = math.sqrt(2.0)
 
@@ -54,8 +55,25 @@ def _heap_pop(heap_f, heap_i, n):
 
 
 @njit(cache=True)
-def _astar(blocked, si, sj, gi, gj):
-    """Cell indices (flattened, start first) of a shortest 8-connected path; empty if none."""
+def _step(blocked, ci, cj, di, dj):
+    """Length (cells) of the 8-connected move from (ci, cj) by (di, dj), or -1 where it is not allowed: off
+    the grid, into a blocked cell, or cutting a blocked corner."""
+    nx, ny = blocked.shape
+    ni, nj = ci + di, cj + dj
+    if (di == 0 and dj == 0) or ni < 0 or nj < 0 or ni >= nx or nj >= ny or blocked[ni, nj]:
+        return -1.0
+    if di != 0 and dj != 0:
+        if blocked[ci + di, cj] or blocked[ci, cj + dj]:
+            return -1.0  # no corner cutting
+        return math.sqrt(2.0)
+    return 1.0
+
+
+@njit(cache=True)
+def _search(blocked, si, sj, gi, gj):
+    """Best-first search over the 8-connected grid from (si, sj): A* toward (gi, gj) with the octile
+    heuristic (admissible: shortest on the grid), stopping there; with gi < 0, Dijkstra over every cell
+    reachable. Returns (g, parent), flattened: path length in cells from the start, previous cell (-1)."""
     nx, ny = blocked.shape
     total = nx * ny
     g = np.full(total, np.inf)
@@ -64,41 +82,45 @@ def _astar(blocked, si, sj, gi, gj):
     cap = 8 * total + 1
     heap_f = np.empty(cap)
     heap_i = np.empty(cap, dtype=np.int64)
-    start, goal = si * ny + sj, gi * ny + gj
+    start, goal = si * ny + sj, (gi * ny + gj if gi >= 0 else -1)
     g[start] = 0.0
     n = _heap_push(heap_f, heap_i, 0, 0.0, start)
     sqrt2 = math.sqrt(2.0)
-    found = False
     while n > 0:
         cur, n = _heap_pop(heap_f, heap_i, n)
         if closed[cur]:
             continue
         if cur == goal:
-            found = True
             break
         closed[cur] = True
         ci, cj = cur // ny, cur % ny
         for di in range(-1, 2):
             for dj in range(-1, 2):
-                if di == 0 and dj == 0:
+                step = _step(blocked, ci, cj, di, dj)
+                if step < 0.0:
                     continue
                 ni, nj = ci + di, cj + dj
-                if ni < 0 or nj < 0 or ni >= nx or nj >= ny or blocked[ni, nj]:
-                    continue
-                if di != 0 and dj != 0 and (blocked[ci + di, cj] or blocked[ci, cj + dj]):
-                    continue  # no corner cutting
                 nb = ni * ny + nj
                 if closed[nb]:
                     continue
-                step = sqrt2 if (di != 0 and dj != 0) else 1.0
                 ng = g[cur] + step
                 if ng < g[nb]:
                     g[nb] = ng
                     parent[nb] = cur
-                    dx, dy = abs(ni - gi), abs(nj - gj)
-                    h = (dx + dy) + (sqrt2 - 2.0) * min(dx, dy)
+                    h = 0.0
+                    if goal >= 0:
+                        dx, dy = abs(ni - gi), abs(nj - gj)
+                        h = (dx + dy) + (sqrt2 - 2.0) * min(dx, dy)
                     n = _heap_push(heap_f, heap_i, n, ng + h, nb)
-    if not found:
+    return g, parent
+
+
+@njit(cache=True)
+def _astar(blocked, si, sj, gi, gj):
+    """Cell indices (flattened, start first) of a shortest 8-connected path; empty if none."""
+    g, parent = _search(blocked, si, sj, gi, gj)
+    goal = gi * blocked.shape[1] + gj
+    if not np.isfinite(g[goal]):
         return np.empty(0, dtype=np.int64)
     count = 0
     k = goal
@@ -111,6 +133,25 @@ def _astar(blocked, si, sj, gi, gj):
         out[m] = k
         k = parent[k]
     return out
+
+
+def cost_to_go(blocked: np.ndarray, origin_xy, resolution: float, goal_xy) -> np.ndarray:
+    """(nx, ny) metres still to fly from each cell's centre to the goal on the grid (8-connected, around
+    blocked cells). A blocked cell, or one cut off from the goal, gets the value of the nearest reachable
+    cell plus twice the distance to it: the field stays finite and falls toward free space, so a drone
+    inside the inflation margin is led out of it. All inf only when no cell reaches the goal."""
+    blocked = np.ascontiguousarray(blocked, dtype=np.bool_)
+    nx, ny = blocked.shape
+    ij = np.floor((np.asarray(goal_xy, dtype=float)[:2] - np.asarray(origin_xy, dtype=float)) / resolution).astype(int)
+    g = _nearest_free(blocked, int(np.clip(ij[0], 0, nx - 1)), int(np.clip(ij[1], 0, ny - 1)))
+    if g is None:
+        return np.full((nx, ny), np.inf)
+    field = _search(blocked, g[0], g[1], -1, -1)[0].reshape(nx, ny) * resolution
+    bad = ~np.isfinite(field)
+    if bad.any():
+        dist, (ii, jj) = distance_transform_edt(bad, return_indices=True)
+        field[bad] = field[ii[bad], jj[bad]] + 2.0 * resolution * dist[bad]
+    return field
 
 
 @njit(cache=True)

@@ -296,7 +296,7 @@ class MPC:
             return st.name.removeprefix("OSQP_").lower()
         return "" if np.all(np.isfinite(res.x)) else "nonfinite_solution"
 
-    def _tie_break(self, d, side, forced=None):
+    def _tie_break(self, d, side, forced=None, bias=None):
         """Offsets d (N, J, 3) from obstacle j to c_k whose component along side[j] is below side_bias get
         it raised to side_bias (on their side, left if 0): a symmetric head-on plan would otherwise only
         ever brake or push through on slack. Any tangent plane is conservative. `side`: left of the
@@ -307,7 +307,8 @@ class MPC:
         sgn = np.where(lat < 0, -1.0, 1.0)
         if forced is not None:
             sgn = np.where(forced != 0, forced, sgn)
-        return d + (sgn * np.maximum(np.abs(lat), self.cfg.side_bias) - lat)[..., None] * side
+        bias = self.cfg.side_bias if bias is None else bias
+        return d + (sgn * np.maximum(np.abs(lat), bias) - lat)[..., None] * side
 
     def _dynamic_candidates(self, c, obstacles, side, v_plan=None):
         """The obstacles (4) applies to, nearest first: (distance from the plan to the ellipsoid, index in
@@ -357,7 +358,7 @@ class MPC:
                 combos.append(f)
         return combos, ids
 
-    def _dynamic_rows(self, c, cand, p0, forced=None):
+    def _dynamic_rows(self, c, cand, p0, forced=None, bias=None):
         """(4): unit normals (N, J, 3) and right-hand sides (N, J) for the candidates (_dynamic_candidates);
         forced (J,): the side each must be passed on (0: the tie-break rule's)."""
         cfg, N = self.cfg, self.N
@@ -370,7 +371,7 @@ class MPC:
         # horizontal normals, so the plan goes around it rather than climbing along its shoulder
         tall = ((o[..., 2] - ax[..., 2] <= cfg.z_min) & (o[..., 2] + ax[..., 2] >= cfg.z_max))[..., None]
         flat = np.where(tall, np.array([1.0, 1.0, 0.0]), 1.0)
-        d = self._tie_break((c[:, None, :] - o) * flat, side, forced)
+        d = self._tie_break((c[:, None, :] - o) * flat, side, forced, bias)
         away = (p0 - o) * flat  # c_k at the centre (only with side_bias = 0): toward the drone, else +y
         away = np.where(np.linalg.norm(away, axis=-1, keepdims=True) > 1e-9, away, np.array([0.0, 1.0, 0.0]))
         d = np.where(np.linalg.norm(d, axis=-1, keepdims=True) < 1e-9, away, d)
@@ -488,12 +489,17 @@ class MPC:
         return np.broadcast_to(-h, (K, 2)), self._relaxed_bound(float(-h @ v0[:2]), cfg.max_backward_speed, K)
 
     def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None,
-              heading: float | None = None, geofence=None) -> MPCResult:
+              heading: float | None = None, geofence=None, guide=None) -> MPCResult:
         """One receding-horizon plan from (position, velocity) at time t0; see the module docstring.
         heading: the camera's current yaw [rad]; with it (and fov_half_angle set) the first fov_steps
         velocities stay inside the camera's horizontal view (constraint 6).
         geofence: (lo (2,), hi (2,)) the known walls of the flight area in x, y (a corridor's), or None;
-        every planned position keeps geofence_margin inside it, on the static slack (7)."""
+        every planned position keeps geofence_margin inside it, on the static slack (7).
+        guide: (N, 3) positions of a motion chosen beforehand (planner.maneuvers), or None: the obstacles
+        are linearised at it instead of at the previous plan, and the passing sides are the guide's (no
+        side enumeration (4'), no tie-break offset), and no half-space asks for more room than the guide
+        keeps (its right-hand side is capped at the guide's own value): the decision is the guide's, the MPC
+        refines it."""
         tic = time.perf_counter()
         cfg, N, dt = self.cfg, self.N, self.cfg.dt
         p0, v0, a0 = (np.asarray(x, dtype=float).reshape(3) for x in (position, velocity, acceleration))
@@ -519,6 +525,9 @@ class MPC:
                 zw, yw = self._shift(self._prev[1], self._xblocks, s), self._shift(self._prev[2], self._yblocks, s)
         else:
             c = p0 + np.arange(1, N + 1)[:, None] / N * (p_ref[-1] - p0)
+        guided = guide is not None and np.all(np.isfinite(np.asarray(guide, dtype=float)))
+        if guided:
+            c = np.asarray(guide, dtype=float).reshape(N, 3)
         fwd = (p_ref[-1] - p0)[:2]
         fwd = fwd / np.linalg.norm(fwd) if np.linalg.norm(fwd) > 1e-6 else np.array([1.0, 0.0])
         side = np.array([-fwd[1], fwd[0], 0.0])  # left of the direction of travel
@@ -567,10 +576,12 @@ class MPC:
                 Ax0[self._fov_pos[:len(fb), 0]] = fr
                 u[self._rf:self._rf + 2 * len(fb):2] = fb
             l[self._rs:self._rf] = bs.ravel()
-            combos, enum_ids = self._side_combinations(c, cand, obs)
+            combos, enum_ids = ([None], []) if guided else self._side_combinations(c, cand, obs)
             best, zw0, yw0 = None, zw, yw
             for i, forced in enumerate(combos):
-                nd, bd = self._dynamic_rows(c, cand, p0, forced)
+                nd, bd = self._dynamic_rows(c, cand, p0, forced, 0.0 if guided else None)
+                if guided:  # never ask for more room than the guide keeps: the half-space holds the guide itself
+                    bd = np.minimum(bd, np.einsum("kjd,kd->kj", nd, c))
                 nd[~np.isfinite(bd)], bd[~np.isfinite(bd)] = 0.0, -np.inf
                 J = nd.shape[1]
                 Ax = Ax0.copy()

@@ -251,6 +251,7 @@ class VoxelMap:
         box = np.minimum(self.dims, 2 * np.ceil(np.asarray(cfg.local_update_range) / self.res) + 2)
         self._touched = np.empty(int(np.prod(box)), np.int64)
         self._history: deque[np.ndarray] = deque(maxlen=cfg.dynamic_history)
+        self.version = 0  # grows whenever the map may have changed (reset, update, set_known): for caches
         self.reset()
 
     def reset(self) -> None:
@@ -260,6 +261,7 @@ class VoxelMap:
         self._history.clear()
         self._since.fill(0)
         self._updates = 0  # update() calls so far: the clock of the static_after rule
+        self.version += 1
 
     def set_known(self, occupied: np.ndarray) -> None:
         """Replace the map by known geometry: voxels where ``occupied`` (nx, ny, nz) bool is True become
@@ -271,6 +273,7 @@ class VoxelMap:
         self.reset()
         self.log_odds[...] = np.where(occ, np.float32(self.l_max), np.float32(self.l_min))
         self._since[...] = -self._static_after if self._static_after < np.iinfo(np.int32).max else 0
+        self.version += 1
 
     # -- update ----------------------------------------------------------------------------------------
     def _region(self, center, size) -> np.ndarray:
@@ -291,6 +294,7 @@ class VoxelMap:
         world AABBs. ``stamp`` is carried for the caller's logs only. Returns counters."""
         t0 = time.perf_counter()
         self._updates += 1
+        self.version += 1
         regions = [self._region(c, s) for c, s in dynamic_boxes]
         for r in regions:
             if np.all(r[3:] >= r[:3]):

@@ -1,0 +1,341 @@
+"""Maneuver selection: a few thousand short candidate motions scored against the static map, the goal
+and several futures of every moving obstacle; the best one guides the MPC.
+
+Why: the linear MPC (planner.mpc) linearises each obstacle at its previous plan, so whether it passes
+a person left or right, waits, backs off or goes on is inherited from that plan and a tie-break rule.
+In the corridor episodes that failed with perfect all-around perception, the plan switched sides every
+few replans near a person, and the drone ended up crossing the person's way or pressed against a
+wall. That choice is combinatorial, and a sampled set of whole motions, each scored over the
+horizon, makes it well (sampling-based local planners and Intent-MPC's one solve per intent do the same).
+
+Candidates: from the current state, a target velocity u1 held until t_switch, then a second target u2
+until the horizon's end; each target is reached as fast as the MPC's per-axis acceleration limit allows,
+so a candidate is a piecewise-constant-acceleration trajectory the MPC can fly. Targets lie on a grid in
+the frame of the guiding direction (along the global path toward the goal, and left of it).
+
+Futures of a moving obstacle (hypotheses h, prior weights pi_h): the prediction it came with (constant
+acceleration, then constant velocity), stopping, or turning toward one of 7 other headings 45 degrees
+apart at a walker's turn rate (a standing one starting to walk in 8 directions). People here turn at
+random waypoints and never give way, so every turn must be survivable, not only the likely one.
+
+Cost of a candidate with positions p_k (k = 1..N, t_k = k dt):
+  J = w_goal (g(p_N) + mean_k g(p_k)) / 2                         g: metres to the goal on the map's grid
+    + sum_k [w_hit 1(c(p_k) < r) + w_static max(0, r + m_s - c(p_k))^2]          c: static clearance
+    + w_hit 1(c(stop) < r)                 the point where braking from p_N at a_brake ends
+    + sum_o [sum_h pi_h C_oh + lam max_h C_oh]
+        C_oh = sum_k gamma_k [w_hit 1(e_k < 0) + w_near max(0, m_d - e_k)^2],
+        e_k = |p_k - o_hk| - R_o - r - sigma_k,  gamma_k = 1 up to t_full, then exp(-(t_k - t_full)/t_fade)
+    + w_keep mean_{k <= K_keep} |p_k - q_k|^2       q: the previous choice, shifted to now (commitment)
+    + w_acc mean_k |a_k|^2
+R_o: half the obstacle's longest horizontal side; r: the robot's horizontal circumscribed radius;
+sigma_k: the prediction's standard deviation. All sums are evaluated by one compiled kernel.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.ndimage import distance_transform_edt
+
+from planner.types import ObstaclePrediction
+
+
+@dataclass(frozen=True)
+class ManeuverConfig:
+    along: tuple[float, ...] = (-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)  # m/s target speeds along the guide
+    across: tuple[float, ...] = (-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5)  # m/s target speeds to its left
+    t_switch: float = 1.0  # s: the first target is held this long, the second after
+    # futures of a moving obstacle
+    p_keep: float = 0.55  # prior of its own prediction
+    p_stop: float = 0.05  # of stopping
+    p_turn: float = 0.40  # shared by the 7 other headings
+    turn_rate: float = 2.0  # rad/s at walking speed (a walker's 2 m/s^2 of lateral acceleration at 1 m/s)
+    walk_speed: tuple[float, float] = (0.6, 1.6)  # m/s: the speed of a turning hypothesis, its own clipped to this
+    start_accel: float = 1.0  # m/s^2: a standing obstacle's hypotheses speed up at this
+    stop_decel: float = 1.5  # m/s^2
+    standing: float = 0.3  # m/s: slower than this an obstacle has no heading: 8 absolute directions
+    worst_case: float = 0.3  # lam: weight of the worst hypothesis beside the expectation
+    # cost weights (units: metres of path to the goal)
+    w_goal: float = 1.0
+    w_hit: float = 30.0  # per step of contact (per hypothesis, weighted as above)
+    w_near: float = 20.0  # per step and m^2 inside the dynamic margin
+    dynamic_margin: float = 0.3  # m_d; the MPC's dynamic_margin
+    w_static: float = 60.0  # per step and m^2 inside the static margin
+    static_margin: float = 0.15  # m_s beyond the robot radius
+    brake: float = 2.5  # m/s^2 for the stopping point
+    t_full: float = 1.2  # s of full weight on an obstacle's own prediction ...
+    t_fade: float = 0.8  # ... fading after with this time constant (later steps are replanned anyway)
+    # its other futures are answered by replanning once they show: from react_delay on the drone can accelerate
+    # away at evade_accel, so under them the separation needed shrinks by evade_accel (t - react_delay)^2 / 2
+    react_delay: float = 0.3  # s: a turn shows in the velocity and reaches a new plan (perception, 10 Hz plans)
+    evade_accel: float = 2.0  # m/s^2, within the MPC's limit
+    t_full_alt: float = 1.2  # s of full weight on the other futures...
+    t_fade_alt: float = 0.8  # ...then fading like the prediction's
+    max_extent: float = 0.7  # m: an obstacle's radius is half its longest horizontal side, at most half this (a
+    # walker's box grows with the stride and the swinging arms: 0.93 m measured; contacts in the corridor
+    # episodes happened 0.4-0.7 m from the box centre, drone centre included)
+    w_keep: float = 2.0  # per m^2, commitment to the previous choice
+    keep_steps: int = 10  # over the first steps
+    w_acc: float = 0.01  # per (m/s^2)^2
+    band_half_height: float = 0.45  # m: static columns count within the flight altitude +- this
+    near_goal: float = 1.0  # m: within this of the goal the static thresholds are no stricter than the goal allows
+
+
+@dataclass(frozen=True, eq=False)
+class Maneuver:
+    positions: np.ndarray  # (N+1, 2) from the current position
+    velocities: np.ndarray  # (N+1, 2)
+    accelerations: np.ndarray  # (N, 2)
+    cost: float
+    parts: dict  # the cost's terms for the chosen candidate
+    candidates: int
+
+
+@njit(cache=True, nogil=True)
+def _two_phase(p0, v0, targets, ks, N, dt, amax, extra):
+    """Positions, velocities, accelerations (T*T + extra, N, 2) of every pair of targets (first held for ks
+    steps, the second after), each reached by bang-bang velocity tracking: every step the acceleration
+    that reaches the target velocity, clipped to +-amax per axis. The last ``extra`` rows are left for the
+    caller to fill."""
+    T = targets.shape[0]
+    P, V, A = np.empty((T * T + extra, N, 2)), np.empty((T * T + extra, N, 2)), np.empty((T * T + extra, N, 2))
+    for a in range(T):
+        for b in range(T):
+            c = a * T + b
+            for ax in range(2):
+                p, v = p0[ax], v0[ax]
+                for k in range(N):
+                    tv = targets[a, ax] if k < ks else targets[b, ax]
+                    acc = min(max((tv - v) / dt, -amax), amax)
+                    p += v * dt + 0.5 * acc * dt * dt
+                    v += acc * dt
+                    P[c, k, ax], V[c, k, ax], A[c, k, ax] = p, v, acc
+    return P, V, A
+
+
+def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
+    """Futures of one moving obstacle: centres (H, K, 2) at ``times`` and prior weights (H,)."""
+    t = np.asarray(times, dtype=float)
+    c, v = np.asarray(ob.center, float)[:2], np.asarray(ob.velocity, float)[:2]
+    keep = ob.predict(t)[:, :2]
+    speed = float(np.hypot(*v))
+    dt = np.diff(np.r_[0.0, t])
+    paths, weights = [keep], [cfg.p_keep]
+    # stopping: decelerate along the current velocity
+    ts = speed / cfg.stop_decel  # standing from then on
+    s_stop = np.where(t < ts, speed * t - 0.5 * cfg.stop_decel * t * t, speed * ts - 0.5 * cfg.stop_decel * ts * ts)
+    u = v / speed if speed > 1e-6 else np.zeros(2)
+    paths.append(c + s_stop[:, None] * u)
+    weights.append(cfg.p_stop)
+    lo, hi = cfg.walk_speed
+    if speed < cfg.standing:  # no heading: start walking in 8 directions
+        heads = np.arange(8) * (math.pi / 4)
+        w = cfg.p_turn / 8
+        sp = np.minimum(speed + cfg.start_accel * t, lo)
+        for h in heads:
+            d = np.array([math.cos(h), math.sin(h)])
+            paths.append(c + np.cumsum(sp * dt)[:, None] * d)
+            weights.append(w)
+    else:
+        th0 = math.atan2(v[1], v[0])
+        s = float(np.clip(speed, lo, hi))
+        rate = cfg.turn_rate * min(1.0, 1.0 / s) if s > 0 else cfg.turn_rate
+        w = cfg.p_turn / 7
+        for dh in np.radians([45, -45, 90, -90, 135, -135, 180]):
+            th = th0 + np.sign(dh) * np.minimum(rate * t, abs(dh))
+            sp = s * np.where(rate * t < abs(dh), max(math.cos(abs(dh) / 2), 0.3), 1.0)  # slower while turning
+            step = np.stack([np.cos(th), np.sin(th)], axis=1) * (sp * dt)[:, None]
+            paths.append(c + np.cumsum(step, axis=0))
+            weights.append(w)
+    return np.stack(paths), np.asarray(weights, dtype=float)
+
+
+@njit(cache=True, nogil=True)
+def _score(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamma, keep, r_robot, m_s, m_d,
+           w_goal, w_hit, w_static, w_near, worst, w_keep, w_acc, gx, gy, near_goal, r_goal, m_goal, parts):
+    """Cost (C,) of candidates P (C, K, 2); parts (C, 5) gets goal, static, dynamic, keep, effort. Within
+    near_goal of the goal (gx, gy) the static thresholds are r_goal and m_goal (what the goal allows)."""
+    C, K = P.shape[0], P.shape[1]
+    nx, ny = clear.shape
+    H = O.shape[0]
+    J = np.empty(C)
+    ch = np.empty(H)
+    for c in range(C):
+        g_sum = 0.0
+        st = 0.0
+        for k in range(K + 1):
+            if k < K:
+                x, y = P[c, k, 0], P[c, k, 1]
+            else:
+                x, y = stop[c, 0], stop[c, 1]
+            i = int(math.floor((x - ox) / res))
+            j = int(math.floor((y - oy) / res))
+            i = min(max(i, 0), nx - 1)
+            j = min(max(j, 0), ny - 1)
+            d = clear[i, j]
+            rr, mm = r_robot, m_s
+            if (x - gx) * (x - gx) + (y - gy) * (y - gy) < near_goal * near_goal:
+                rr, mm = r_goal, m_goal
+            if d < rr:
+                st += w_hit
+            if k < K:
+                e = rr + mm - d
+                if e > 0.0:
+                    st += w_static * e * e
+                g_sum += goal[i, j]
+                if k == K - 1:
+                    g_end = goal[i, j]
+        jg = w_goal * 0.5 * (g_end + g_sum / K)
+        for h in range(H):
+            s = 0.0
+            for k in range(K):
+                dx = P[c, k, 0] - O[h, k, 0]
+                dy = P[c, k, 1] - O[h, k, 1]
+                e = math.sqrt(dx * dx + dy * dy) - R[h, k]
+                if e < m_d:
+                    v = w_near * (m_d - e) * (m_d - e)
+                    if e < 0.0:
+                        v += w_hit
+                    s += gamma[h, k] * v
+            ch[h] = s
+        dyn = 0.0
+        for o in range(n_obst):
+            exp, mx = 0.0, 0.0
+            for h in range(H):
+                if owner[h] == o:
+                    exp += prior[h] * ch[h]
+                    mx = max(mx, ch[h])
+            dyn += exp + worst * mx
+        kp = 0.0
+        nk = min(keep.shape[0], K)
+        for k in range(nk):
+            dx = P[c, k, 0] - keep[k, 0]
+            dy = P[c, k, 1] - keep[k, 1]
+            kp += dx * dx + dy * dy
+        kp = w_keep * kp / nk if nk > 0 else 0.0
+        ef = 0.0
+        for k in range(K):
+            ef += A[c, k, 0] * A[c, k, 0] + A[c, k, 1] * A[c, k, 1]
+        ef = w_acc * ef / K
+        J[c] = jg + st + dyn + kp + ef
+        parts[c, 0], parts[c, 1], parts[c, 2], parts[c, 3], parts[c, 4] = jg, st, dyn, kp, ef
+    return J
+
+
+def static_clearance(column_occupied: np.ndarray, resolution: float, origin_xy, geofence=None) -> np.ndarray:
+    """(nx, ny) metres from each column centre to the nearest occupied column's edge (cells outside the
+    geofence, when given, count as occupied: the walls of the flight area)."""
+    occ = np.asarray(column_occupied, dtype=bool).copy()
+    if geofence is not None:
+        lo, hi = (np.asarray(x, float).reshape(-1)[:2] for x in geofence)
+        nx, ny = occ.shape
+        cx = origin_xy[0] + (np.arange(nx) + 0.5) * resolution
+        cy = origin_xy[1] + (np.arange(ny) + 0.5) * resolution
+        occ[(cx < lo[0]) | (cx > hi[0]), :] = True
+        occ[:, (cy < lo[1]) | (cy > hi[1])] = True
+    if not occ.any():
+        return np.full(occ.shape, 1e3)
+    return distance_transform_edt(~occ) * resolution - 0.5 * resolution
+
+
+class ManeuverSelector:
+    """Chooses the maneuver that guides the MPC (module docstring). ``choose`` is called once per plan."""
+
+    def __init__(self, cfg: ManeuverConfig = ManeuverConfig(), horizon: int = 25, dt: float = 0.1,
+                 a_max: float = 2.5, v_max: float = 2.0, robot_radius: float = 0.437):
+        self.cfg, self.N, self.dt = cfg, horizon, dt
+        self.a_max, self.v_max, self.r = a_max, v_max, robot_radius
+        self.t = dt * np.arange(1, horizon + 1)
+        self.k_switch = int(round(cfg.t_switch / dt))
+        g = np.array([(a, b) for a in cfg.along for b in cfg.across], dtype=float)
+        self._grid = g  # (T, 2) targets in the guide's frame
+        fade = lambda full, tau: np.where(self.t <= full, 1.0, np.exp(-(self.t - full) / tau))  # noqa: E731
+        self.gamma = fade(cfg.t_full, cfg.t_fade)  # (N,) for an obstacle's own prediction
+        self.gamma_alt = fade(cfg.t_full_alt, cfg.t_fade_alt)  # (N,) for its other futures
+        self.evade = 0.5 * cfg.evade_accel * np.maximum(self.t - cfg.react_delay, 0.0) ** 2  # (N,) m
+        self.reset()
+
+    def reset(self) -> None:
+        self._prev: tuple[float, np.ndarray, np.ndarray] | None = None  # (t0, positions (N+1, 2), accelerations)
+        self._shifted: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the previous choice, now
+
+    def candidates(self, p0, v0, guide_dir):
+        """Positions (C, N, 2), velocities, accelerations of every two-phase candidate, plus the previous
+        choice's accelerations flown again from now (last)."""
+        e = np.asarray(guide_dir, float)[:2]
+        e = e / max(np.linalg.norm(e), 1e-9)
+        n = np.array([-e[1], e[0]])
+        T = self._grid @ np.stack([e, n])  # world targets (T, 2)
+        vb = self.v_max - 0.01
+        T = np.clip(T, -vb, vb)
+        acc = self._shifted[1]
+        P, V, A = _two_phase(np.asarray(p0, float), np.asarray(v0, float), np.ascontiguousarray(T), self.k_switch,
+                             self.N, self.dt, self.a_max, int(acc is not None))
+        if acc is not None:
+            vel = np.clip(np.vstack([v0, v0 + self.dt * np.cumsum(acc, axis=0)]), -vb, vb)
+            acc = np.diff(vel, axis=0) / self.dt
+            P[-1] = p0 + np.cumsum(self.dt * vel[:-1] + 0.5 * self.dt * self.dt * acc, axis=0)
+            V[-1], A[-1] = vel[1:], acc
+        return P, V, A
+
+    def choose(self, t0: float, p0, v0, guide_dir, obstacles, clear: np.ndarray, goal_field: np.ndarray,
+               origin_xy, resolution: float, goal_xy) -> Maneuver:
+        """The best candidate from (p0, v0) at time t0; goal_field: metres to goal_xy per column cell,
+        clear: static clearance per cell (static_clearance), both on the grid at origin_xy, resolution."""
+        cfg, N, dt = self.cfg, self.N, self.dt
+        gi = np.clip(np.floor((np.asarray(goal_xy, float)[:2] - origin_xy) / resolution).astype(int), 0,
+                     np.array(clear.shape) - 1)
+        c_goal = float(clear[gi[0], gi[1]])  # a goal near a wall: the static thresholds relax around it
+        r_goal = min(self.r, max(c_goal - 0.05, 0.0))
+        m_goal = min(cfg.static_margin, max(c_goal - r_goal, 0.0))
+        p0, v0 = np.asarray(p0, float)[:2], np.asarray(v0, float)[:2]
+        self._shift_previous(t0)
+        P, V, A = self.candidates(p0, v0, guide_dir)
+        sp = np.linalg.norm(V[:, -1], axis=1)
+        stop = P[:, -1] + V[:, -1] * (sp / (2 * cfg.brake))[:, None]
+        O, R, G, owner, prior = [], [], [], [], []
+        for j, ob in enumerate(obstacles):
+            paths, w = hypotheses(ob, self.t, cfg)
+            size = np.asarray(ob.size, float)
+            rad = 0.5 * min(max(size[0], size[1]), cfg.max_extent) + self.r + ob.std_at(self.t)
+            O.append(paths)
+            R.append(np.vstack([rad[None], np.repeat((rad - self.evade)[None], len(w) - 1, axis=0)]))
+            G.append(np.vstack([self.gamma[None], np.repeat(self.gamma_alt[None], len(w) - 1, axis=0)]))
+            owner.append(np.full(len(w), j))
+            prior.append(w)
+        if O:
+            O, R, G = np.concatenate(O), np.ascontiguousarray(np.concatenate(R)), np.concatenate(G)
+            owner, prior = np.concatenate(owner).astype(np.int64), np.concatenate(prior)
+        else:
+            O, R, G = np.zeros((0, N, 2)), np.zeros((0, N)), np.zeros((0, N))
+            owner, prior = np.zeros(0, np.int64), np.zeros(0)
+        keep = self._shifted[0][1:cfg.keep_steps + 1] if self._shifted[0] is not None else np.zeros((0, 2))
+        parts = np.empty((len(P), 5))
+        J = _score(np.ascontiguousarray(P), np.ascontiguousarray(A), stop, clear, goal_field,
+                   float(origin_xy[0]), float(origin_xy[1]), float(resolution), np.ascontiguousarray(O), R, owner,
+                   prior, len(obstacles), G, np.ascontiguousarray(keep), self.r, cfg.static_margin,
+                   cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static, cfg.w_near, cfg.worst_case, cfg.w_keep,
+                   cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]), cfg.near_goal, r_goal, m_goal, parts)
+        b = int(np.argmin(J))
+        pos, vel = np.vstack([p0, P[b]]), np.vstack([v0, V[b]])
+        self._prev = (float(t0), pos, A[b].copy())
+        names = ("goal", "static", "dynamic", "keep", "effort")
+        return Maneuver(pos, vel, A[b].copy(), float(J[b]), dict(zip(names, parts[b].round(4).tolist())), len(P))
+
+    def _shift_previous(self, t0: float) -> None:
+        """The previous choice as seen from t0: positions (N+1, 2) and accelerations (N, 2), shifted by the
+        elapsed steps and held (zero acceleration) at the end; None when there is none or it is stale."""
+        self._shifted = (None, None)
+        if self._prev is None:
+            return
+        s = int(round((t0 - self._prev[0]) / self.dt))
+        if not 0 <= s <= self.N:
+            self._prev = None
+            return
+        pos, acc = self._prev[1], self._prev[2]
+        end_v = (pos[-1] - pos[-2]) / self.dt
+        pos = np.vstack([pos[s:], pos[-1] + end_v * self.dt * np.arange(1, s + 1)[:, None]])
+        acc = np.vstack([acc[s:], np.zeros((s, 2))])
+        self._shifted = (pos, acc)

@@ -1,0 +1,179 @@
+"""The maneuver layer (planner.maneuvers) and the cost-to-go field it scores progress with."""
+import math
+
+import numpy as np
+import pytest
+
+from planner.global_path import cost_to_go
+from planner.maneuvers import ManeuverConfig, ManeuverSelector, hypotheses, static_clearance
+from planner.mpc import MPC, MPCConfig
+from planner.types import ObstaclePrediction
+
+RES = 0.1
+ORIGIN = np.array([-0.5, -2.5])
+FENCE = (np.array([0.0, -2.0]), np.array([16.0, 2.0]))
+GOAL = np.array([15.5, 0.0])
+R_ROBOT = 0.437
+
+
+def _fields(occupied=None):
+    occ = np.zeros((170, 50), bool) if occupied is None else occupied
+    clear = static_clearance(occ, RES, ORIGIN, geofence=FENCE)
+    return clear, cost_to_go(occ, ORIGIN, RES, GOAL)
+
+
+def _person(x, y, vx, vy, oid=1):
+    return ObstaclePrediction(id=oid, center=np.array([x, y, 0.9]), size=np.array([0.5, 0.6, 1.8]),
+                              velocity=np.array([vx, vy, 0.0]))
+
+
+def _choose(sel, p, v, obstacles, occupied=None, t0=0.0, goal=GOAL):
+    clear, field = _fields(occupied)
+    return sel.choose(t0, p, v, goal - np.asarray(p), obstacles, clear, field, ORIGIN, RES, goal)
+
+
+def _roll_person(ob, t):
+    return ob.predict(np.asarray(t))[:, :2]
+
+
+# --- cost to go -------------------------------------------------------------------------------------
+
+def test_cost_to_go_is_the_path_length_around_obstacles():
+    free = np.zeros((170, 50), bool)
+    g = cost_to_go(free, ORIGIN, RES, GOAL)
+    assert g[10, 25] == pytest.approx(15.0, abs=0.01)  # straight along the grid: 150 cells
+    assert g[150, 25] == pytest.approx(1.0, abs=0.01)
+    wall = free.copy()
+    wall[80:83, 0:40] = True  # a wall across most of the corridor at x = 7.5-7.8, a gap at the top
+    gw = cost_to_go(wall, ORIGIN, RES, GOAL)
+    assert gw[10, 25] > g[10, 25] + 1.0  # the detour through the gap
+    assert np.isfinite(gw).all()
+    inside = gw[81, 20]  # a blocked cell: finite, higher than the free cells beside the wall
+    assert np.isfinite(inside) and inside > min(gw[79, 20], gw[84, 20])
+
+
+def test_cost_to_go_of_a_sealed_goal_is_all_inf_and_of_a_cut_off_region_leads_out():
+    free = np.zeros((60, 30), bool)
+    free[30, :] = True  # a wall from side to side: the left part is cut off from the goal
+    g = cost_to_go(free, (0.0, 0.0), RES, (5.0, 1.5))
+    assert np.isfinite(g).all()
+    assert g[10, 15] > g[29, 15] > g[31, 15]  # cut-off cells fall toward the wall, beyond which is the goal
+    sealed = np.ones((20, 20), bool)
+    assert np.isinf(cost_to_go(sealed, (0.0, 0.0), RES, (1.0, 1.0))).all()
+
+
+# --- futures of moving obstacles --------------------------------------------------------------------
+
+def test_hypotheses_keep_the_prediction_turn_at_walking_rates_and_stop():
+    cfg = ManeuverConfig()
+    t = 0.1 * np.arange(1, 26)
+    ob = _person(5.0, 0.0, -1.0, 0.0)
+    paths, w = hypotheses(ob, t, cfg)
+    assert paths.shape == (9, 25, 2) and w.sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(paths[0], _roll_person(ob, t))  # its own prediction first
+    stop = paths[1]
+    assert stop[-1, 0] == pytest.approx(5.0 - 1.0 / (2 * cfg.stop_decel), abs=1e-9)  # braked to a stand
+    heading_end = [math.atan2(*(p[-1] - p[-2])[::-1]) for p in paths[2:]]
+    turned = np.degrees(np.abs([(h - math.pi + math.pi) % (2 * math.pi) - math.pi for h in heading_end]))
+    np.testing.assert_allclose(np.sort(turned), [45, 45, 90, 90, 135, 135, 180], atol=1e-6)
+    steps = np.linalg.norm(np.diff(paths[2:], axis=1), axis=2) / 0.1
+    assert steps.max() <= 1.0 + 1e-9  # no hypothesis walks faster than the person does
+    standing, ws = hypotheses(_person(5.0, 0.0, 0.0, 0.0), t, cfg)
+    assert standing.shape[0] == 10 and ws.sum() == pytest.approx(1.0)  # keep, stop, 8 directions
+    ends = standing[2:, -1] - np.array([5.0, 0.0])
+    assert np.allclose(np.linalg.norm(ends, axis=1), np.linalg.norm(ends[0]))  # the same reach every way
+
+
+# --- candidates -------------------------------------------------------------------------------------
+
+def test_candidates_are_trajectories_the_mpc_can_fly():
+    sel = ManeuverSelector()
+    P, V, A = sel.candidates(np.array([2.0, 0.3]), np.array([1.8, -0.7]), np.array([1.0, 0.2]))
+    assert P.shape == ((len(sel.cfg.along) * len(sel.cfg.across)) ** 2, 25, 2)  # every pair of targets
+    assert np.abs(A).max() <= sel.a_max + 1e-9 and np.abs(V).max() <= sel.v_max
+    dt, p, v = sel.dt, np.array([2.0, 0.3]), np.array([1.8, -0.7])
+    for k in range(25):  # the double integrator under piecewise-constant acceleration, exactly
+        p = p + v * dt + 0.5 * A[:, k] * dt * dt
+        v = v + A[:, k] * dt
+        np.testing.assert_allclose(P[:, k], p, atol=1e-9)
+        np.testing.assert_allclose(V[:, k], v, atol=1e-9)
+
+
+# --- choices ----------------------------------------------------------------------------------------
+
+def _min_gap(man, ob, t):
+    """Smallest centre distance minus the contact radius the selector uses, over the horizon."""
+    rad = 0.5 * min(max(ob.size[0], ob.size[1]), ManeuverConfig().max_extent) + R_ROBOT
+    return float(np.min(np.linalg.norm(man.positions[1:] - _roll_person(ob, t), axis=1)) - rad)
+
+
+@pytest.mark.parametrize("y_person", [-0.3, 0.3])
+def test_a_head_on_walker_is_passed_on_the_side_with_room(y_person):
+    sel = ManeuverSelector()
+    ob = _person(6.0, y_person, -1.0, 0.0)
+    man = _choose(sel, (2.0, 0.0), (1.5, 0.0), [ob])
+    t = sel.t
+    assert _min_gap(man, ob, t) > 0.1  # clear of the walker all along its prediction
+    lateral = man.positions[1:, 1] - _roll_person(ob, t)[:, 1]
+    closest = np.argmin(np.linalg.norm(man.positions[1:] - _roll_person(ob, t), axis=1))
+    assert np.sign(lateral[closest]) == -np.sign(y_person)  # the side away from the walker's offset
+    assert np.all(np.abs(man.positions[:, 1]) < 2.0 - R_ROBOT)  # inside the walls
+
+
+def test_a_crossing_walker_is_passed_with_the_full_margin():
+    """A walker crossing from the right, 2.5 m ahead: whether the drone passes behind it or well ahead of
+    it, it keeps the contact distance plus the dynamic margin from the walker's prediction."""
+    sel = ManeuverSelector()
+    ob = _person(4.5, -1.6, 0.0, 1.0)
+    man = _choose(sel, (2.0, 0.0), (1.5, 0.0), [ob])
+    assert _min_gap(man, ob, sel.t) >= sel.cfg.dynamic_margin - 0.02
+    assert man.positions[-1, 0] > 5.5  # and it goes on
+
+
+def test_static_obstacles_and_walls_are_kept_clear_and_a_goal_near_a_wall_is_reached():
+    occ = np.zeros((170, 50), bool)
+    occ[55:62, 20:30] = True  # a 0.7 x 1.0 m block at x = 5.0-5.7, y = -0.5-0.5 on the flight line
+    clear, _ = _fields(occ)
+    sel = ManeuverSelector()
+    man = _choose(sel, (3.0, 0.0), (1.5, 0.0), [], occupied=occ)
+    i = np.floor((man.positions[:, 0] - ORIGIN[0]) / RES).astype(int)
+    j = np.floor((man.positions[:, 1] - ORIGIN[1]) / RES).astype(int)
+    assert clear[i, j].min() >= R_ROBOT  # around the block
+    assert man.positions[-1, 0] > 6.0  # and on toward the goal
+    near = ManeuverSelector()  # the goal lies 0.5 m from the end wall, inside the usual static margin
+    for k in range(30):
+        m = _choose(near, (14.5, 0.0), (0.0, 0.0), [], t0=0.1 * k)
+    assert np.linalg.norm(m.positions[-1] - GOAL) < 0.3
+
+
+def test_the_choice_is_kept_when_the_walker_wavers():
+    """A head-on walker straight on the flight line, its heading wavering by a few degrees from plan to plan:
+    the side chosen first is kept."""
+    sel = ManeuverSelector()
+    rng = np.random.default_rng(0)
+    p, v = np.array([2.0, 0.0]), np.array([1.5, 0.0])
+    sides = []
+    for k in range(8):
+        a = math.pi + rng.normal(0.0, math.radians(4))
+        ob = _person(6.5 - 0.1 * k, 0.0, math.cos(a), math.sin(a))
+        man = _choose(sel, p, v, [ob], t0=0.1 * k)
+        sides.append(np.sign(man.positions[10, 1]))
+        p, v = man.positions[1], man.velocities[1]
+    assert len(set(sides)) == 1 and sides[0] != 0
+
+
+def test_the_mpc_follows_the_guides_side():
+    """Guided, the MPC passes a head-on walker on the guide's side, whichever side its tie-break would take."""
+    mpc_cfg = MPCConfig(robot_radius=R_ROBOT)
+    t = 0.1 * np.arange(1, 26)
+    ob = _person(5.0, 0.0, -1.0, 0.0)
+    for side in (-1.0, 1.0):
+        mpc = MPC(mpc_cfg)
+        guide = np.column_stack([2.0 + 1.5 * t, side * np.minimum(1.2, 1.5 * t), np.full(25, 1.2)])
+        v_ref = np.column_stack([np.full(25, 1.5), np.where(1.5 * t < 1.2, side * 1.5, 0.0), np.zeros(25)])
+        r = mpc.solve(0.0, [2.0, 0.0, 1.2], [1.5, 0.0, 0.0], [0.0, 0.0, 0.0], guide, v_ref, obstacles=[ob],
+                      guide=guide)
+        assert r.status == "solved"
+        person = ob.predict(t)
+        k = int(np.argmin(np.linalg.norm(r.trajectory.positions[1:, :2] - person[:, :2], axis=1)))
+        assert np.sign(r.trajectory.positions[k + 1, 1] - person[k, 1]) == side

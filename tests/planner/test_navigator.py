@@ -1,0 +1,97 @@
+"""The default planner (planner.navigator): path, maneuver choice, MPC and heading, through plan()."""
+import math
+
+import numpy as np
+import pytest
+
+from planner.mpc import MPCConfig
+from planner.navigator import MPCPlanner, NavigatorConfig
+from planner.types import ObstaclePrediction, PlannerInput
+from planner.voxel_map import MapConfig, VoxelMap
+
+R_ROBOT = 0.437
+GOAL = np.array([15.5, 0.0, 1.2])
+FENCE = (np.array([0.0, -2.0]), np.array([16.0, 2.0]))
+
+
+def _corridor_map():
+    """The corridor's walls, known (16 x 4 m, as the closed loop's map bounds)."""
+    m = VoxelMap(MapConfig(origin=(-0.5, -2.5, -0.1), size=(17.0, 5.0, 3.2)))
+    occ = np.zeros(tuple(m.dims), bool)
+    occ[:, :5, :] = occ[:, 45:, :] = True  # y < -2, y > 2
+    occ[:5, :, :] = occ[165:, :, :] = True  # x < 0, x > 16
+    m.set_known(occ)
+    return m
+
+
+def _planner(**kw):
+    return MPCPlanner(NavigatorConfig(mpc=MPCConfig(robot_radius=R_ROBOT), **kw))
+
+
+def _input(t, p, v, obstacles=(), yaw=0.0, occupancy=None):
+    return PlannerInput(stamp=t, position=np.array([p[0], p[1], 1.2]), velocity=np.array([v[0], v[1], 0.0]),
+                        acceleration=np.zeros(3), goal=GOAL, obstacles=tuple(obstacles),
+                        occupancy=occupancy if occupancy is not None else _corridor_map(), yaw=yaw, geofence=FENCE)
+
+
+def _bearing_off(yaw, p, q):
+    b = math.atan2(q[1] - p[1], q[0] - p[0])
+    return abs((b - yaw + math.pi) % (2 * math.pi) - math.pi)
+
+
+def test_open_corridor_heads_for_the_goal():
+    pl = _planner()
+    tr = pl.plan(_input(0.0, (2.0, 0.0), (1.0, 0.0)))
+    assert tr.status == "solved" and abs(tr.yaw) < math.radians(6)
+    assert tr.positions[-1, 0] > 5.0  # on its way at cruise
+    assert pl.last_maneuver is not None and tr.solve_ms > 0
+
+
+def test_a_person_close_beside_the_drone_is_kept_in_view_while_it_gives_way():
+    """A person 1.1 m off, 63 degrees to the right of the path ahead, walks at the hovering drone: the drone
+    gives way, and its heading turns to keep the person inside the camera's view (facing the path or the
+    evasive motion would lose them)."""
+    pl = _planner()
+    occ = _corridor_map()
+    person = ObstaclePrediction(id=1, center=np.array([5.5, -1.0, 0.9]), size=np.array([0.5, 0.6, 1.8]),
+                                velocity=np.array([-0.6, 0.6, 0.0]))
+    p = np.array([5.0, 0.0])
+    tr = pl.plan(_input(0.0, p, (0.0, 0.0), [person], occupancy=occ))
+    cfg = pl.cfg
+    assert _bearing_off(tr.yaw, p, person.center) < cfg.camera_half_fov  # the person stays in view
+    moved = pl.last_maneuver.positions[10] - p
+    assert np.hypot(*moved) > 0.3  # it does give way
+    gap = np.linalg.norm(pl.last_maneuver.positions[1:] - person.predict(0.1 * np.arange(1, 26))[:, :2], axis=1)
+    assert gap.min() > 0.3 + R_ROBOT
+
+
+def test_without_a_map_or_with_maneuvers_off_the_mpc_follows_the_path():
+    for pl, occ in ((_planner(), None), (_planner(maneuvers=None), _corridor_map())):
+        inp = PlannerInput(stamp=0.0, position=np.array([2.0, 0.0, 1.2]), velocity=np.array([1.0, 0.0, 0.0]),
+                           acceleration=np.zeros(3), goal=GOAL, obstacles=(), occupancy=occ, yaw=0.0,
+                           geofence=FENCE)
+        tr = pl.plan(inp)
+        assert tr.status == "solved" and pl.last_maneuver is None
+        assert tr.positions[-1, 0] > 4.0 and abs(tr.positions[-1, 1]) < 0.1
+
+
+@pytest.mark.parametrize("side", [-1.0, 1.0])
+def test_a_head_on_person_is_passed_without_switching_sides(side):
+    """Receding horizon, a walker coming head-on slightly off the centre line: the drone passes on one side
+    and keeps its margin all along (the MPC follows the maneuver; the next plans keep the side)."""
+    pl = _planner()
+    occ = _corridor_map()
+    p, v = np.array([2.0, 0.0]), np.array([1.5, 0.0])
+    q = np.array([7.0, 0.2 * side])
+    lateral = []
+    for k in range(40):
+        person = ObstaclePrediction(id=1, center=np.array([q[0], q[1], 0.9]), size=np.array([0.5, 0.6, 1.8]),
+                                    velocity=np.array([-1.0, 0.0, 0.0]))
+        tr = pl.plan(_input(0.1 * k, p, v, [person], occupancy=occ))
+        p, v = tr.positions[1, :2], tr.velocities[1, :2]  # fly the first step exactly
+        q = q + np.array([-0.1, 0.0])
+        assert np.hypot(*(p - q)) > R_ROBOT + 0.3  # never within the contact distance
+        if abs(p[0] - q[0]) < 1.0:
+            lateral.append(np.sign(p[1] - q[1]))
+    assert lateral and len(set(lateral)) == 1 and lateral[0] == -side  # one side, the roomier one
+    assert p[0] > q[0] + 1.0  # passed
