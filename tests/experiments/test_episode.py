@@ -125,3 +125,41 @@ def test_known_static_map_renders_nothing_and_holds_the_geometry(tmp_path):
     assert d["timing"]["renderer"] != "none"
     with pytest.raises(ValueError, match="static_map"):
         run_episode(sc, seed=0, perception="oracle", cfg=EpisodeConfig(duration=0.5, static_map="lidar"))
+
+
+def _camera_looking_along_x():
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # optical -> world
+    T[:3, 3] = [0.0, 0.0, 1.2]
+    return T
+
+
+def test_obstacle_memory_keeps_a_walker_out_of_view_as_a_growing_standing_disc():
+    from dodt.frames import CameraIntrinsics
+    from experiments.episode import ObstacleMemory
+
+    K, T = CameraIntrinsics(), _camera_looking_along_x()
+    mem = ObstacleMemory(memory=2.0, reach_speed=1.0)
+    walker = ObstaclePrediction(id=7, center=np.array([0.0, 1.5, 0.85]), size=np.array([0.5, 0.5, 1.7]),
+                                velocity=np.array([1.0, 0.0, 0.0]), position_std=0.1)
+    mem.update((walker,), stamp=0.0)
+    assert mem.extra({7}, 0.5, T, K) == []  # still reported: nothing added
+    (kept,) = mem.extra(set(), 1.0, T, K)  # beside the camera, out of its view
+    np.testing.assert_allclose(kept.center, walker.center)  # where it was last seen, not extrapolated
+    np.testing.assert_allclose(kept.velocity, 0.0)
+    assert kept.position_std == pytest.approx(1.1) and kept.std_growth == 1.0
+    assert mem.extra(set(), 2.5, T, K) == [] and 7 not in mem.last  # older than memory: forgotten
+
+
+def test_obstacle_memory_forgets_a_place_the_camera_sees_empty():
+    from dodt.frames import CameraIntrinsics
+    from experiments.episode import ObstacleMemory
+
+    K, T = CameraIntrinsics(), _camera_looking_along_x()
+    mem = ObstacleMemory(memory=5.0, reach_speed=1.0)
+    ahead = ObstaclePrediction(id=3, center=np.array([3.0, 0.0, 0.85]), size=np.array([0.5, 0.5, 1.7]))
+    far = ObstaclePrediction(id=4, center=np.array([8.0, 0.0, 0.85]), size=np.array([0.5, 0.5, 1.7]))
+    mem.update((ahead, far), stamp=0.0)
+    kept = mem.extra(set(), 0.5, T, K)
+    assert [o.id for o in kept] == [4]  # 3 m ahead in view and not reported: gone; 8 m: beyond what depth proves
+    assert 3 not in mem.last
