@@ -1,11 +1,16 @@
-"""The planner the closed loop flies by default: global A* path on the voxel map, MPC along it.
+"""The planner the closed loop flies by default: global path on the voxel map, a maneuver chosen
+among sampled motions, the MPC refining it.
 
 Every call: (1) every ``path_period`` seconds, or sooner when the current path runs into newly
-occupied cells, an A* path to the goal on the map's column grid at the flight altitude;
-(2) a reference for the MPC horizon sampled along that path at the cruise speed, slowing down to
-stop at the goal; (3) the MPC over the predicted moving obstacles and the occupied voxels near the
-drone. The heading is toward a point ``look_ahead`` metres further on the path, so the camera
-looks where the drone is going rather than where it is dodging.
+occupied cells, an A* path to the goal on the map's column grid at the flight altitude, and the
+cost-to-go field the maneuvers score against (both cached on the map's version);
+(2) with maneuvers (``NavigatorConfig.maneuvers``, the default): ``planner.maneuvers`` scores
+two-phase candidate motions against the goal, static clearance and several hypotheses of each
+moving obstacle's future, and the chosen one is the MPC's reference and the point its obstacle
+constraints are linearised at; without: a reference sampled along the path at cruise speed;
+(3) the MPC over the predicted moving obstacles and the occupied voxels near the drone;
+(4) a heading that keeps both where the drone goes and the nearby moving obstacles in the
+camera's view (without maneuvers: toward a point ``look_ahead`` metres further on the path).
 """
 from __future__ import annotations
 
