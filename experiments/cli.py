@@ -304,6 +304,14 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+def _add_map_option(parser: argparse.ArgumentParser) -> None:
+    """--map for run and sweep (experiments.episode.STATIC_MAPS; not imported here: it loads the simulator)."""
+    parser.add_argument("--map", choices=("depth", "truth"), default="depth",
+                        help="static map: depth (built from the camera, default) or truth (the scenario's geometry "
+                             "known from the start; with oracle, oracle-360 or static-only nothing is rendered: a "
+                             "fast planner test)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="dodt-nav", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -342,9 +350,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--duration", type=float, default=None, help="time limit in seconds (default: the scenario's)")
     r.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
-    r.add_argument("--map", choices=("depth", "truth"), default="depth",
-                   help="static map: depth (built from the camera, default) or truth (the scenario's geometry known "
-                         "from the start; with oracle, oracle-360 or static-only nothing is rendered: a fast planner test)")
+    _add_map_option(r)
     r.add_argument("--viz", choices=("live", "html"), default=None,
                    help="live: stream to a meshcat server on 127.0.0.1; html: write OUT/replay.html")
     r.add_argument("--no-wait", action="store_true", help="live: close the viewer when the episode ends")
@@ -379,9 +385,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
     w.add_argument("--keep-logs", action="store_true", help="keep the episode logs of successful episodes too")
     w.add_argument("--quiet", action="store_true", help="no progress bar")
-    w.add_argument("--map", choices=("depth", "truth"), default="depth",
-                   help="static map: depth (built from the camera, default) or truth (the scenario's geometry known "
-                         "from the start; with oracle, oracle-360 or static-only nothing is rendered: a fast planner test)")
+    _add_map_option(w)
     w.set_defaults(func=_cmd_sweep)
 
     rep = sub.add_parser("reproduce", help="Table I, Table II and the corridor sweeps in one report.md")

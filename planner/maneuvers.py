@@ -259,18 +259,17 @@ class ManeuverSelector:
 
     def reset(self) -> None:
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None  # (t0, positions (N+1, 2), accelerations)
-        self._shifted: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the previous choice, now
 
-    def candidates(self, p0, v0, guide_dir):
-        """Positions (C, N, 2), velocities, accelerations of every two-phase candidate, plus the previous
-        choice's accelerations flown again from now (last)."""
+    def candidates(self, p0, v0, guide_dir, previous_acc=None):
+        """Positions (C, N, 2), velocities, accelerations of every two-phase candidate, plus, when
+        previous_acc (N, 2) is given, the previous choice's accelerations flown again from now (last)."""
         e = np.asarray(guide_dir, float)[:2]
         e = e / max(np.linalg.norm(e), 1e-9)
         n = np.array([-e[1], e[0]])
         T = self._grid @ np.stack([e, n])  # world targets (T, 2)
         vb = self.v_max - 0.01
         T = np.clip(T, -vb, vb)
-        acc = self._shifted[1]
+        acc = previous_acc
         P, V, A = _two_phase(np.asarray(p0, float), np.asarray(v0, float), np.ascontiguousarray(T), self.k_switch,
                              self.N, self.dt, self.a_max, int(acc is not None))
         if acc is not None:
@@ -291,8 +290,8 @@ class ManeuverSelector:
         r_goal = min(self.r, max(c_goal - 0.05, 0.0))
         m_goal = min(cfg.static_margin, max(c_goal - r_goal, 0.0))
         p0, v0 = np.asarray(p0, float)[:2], np.asarray(v0, float)[:2]
-        self._shift_previous(t0)
-        P, V, A = self.candidates(p0, v0, guide_dir)
+        prev_pos, prev_acc = self._shift_previous(t0)
+        P, V, A = self.candidates(p0, v0, guide_dir, prev_acc)
         sp = np.linalg.norm(V[:, -1], axis=1)
         stop = P[:, -1] + V[:, -1] * (sp / (2 * cfg.brake))[:, None]
         O, R, G, owner, prior = [], [], [], [], []
@@ -311,7 +310,7 @@ class ManeuverSelector:
         else:
             O, R, G = np.zeros((0, N, 2)), np.zeros((0, N)), np.zeros((0, N))
             owner, prior = np.zeros(0, np.int64), np.zeros(0)
-        keep = self._shifted[0][1:cfg.keep_steps + 1] if self._shifted[0] is not None else np.zeros((0, 2))
+        keep = prev_pos[1:cfg.keep_steps + 1] if prev_pos is not None else np.zeros((0, 2))
         parts = np.empty((len(P), 5))
         J = _score(np.ascontiguousarray(P), np.ascontiguousarray(A), stop, clear, goal_field,
                    float(origin_xy[0]), float(origin_xy[1]), float(resolution), np.ascontiguousarray(O), R, owner,
@@ -324,18 +323,17 @@ class ManeuverSelector:
         names = ("goal", "static", "dynamic", "keep", "effort")
         return Maneuver(pos, vel, A[b].copy(), float(J[b]), dict(zip(names, parts[b].round(4).tolist())), len(P))
 
-    def _shift_previous(self, t0: float) -> None:
+    def _shift_previous(self, t0: float) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The previous choice as seen from t0: positions (N+1, 2) and accelerations (N, 2), shifted by the
-        elapsed steps and held (zero acceleration) at the end; None when there is none or it is stale."""
-        self._shifted = (None, None)
+        elapsed steps and held (zero acceleration) at the end; (None, None) when there is none or it is stale."""
         if self._prev is None:
-            return
+            return None, None
         s = int(round((t0 - self._prev[0]) / self.dt))
         if not 0 <= s <= self.N:
             self._prev = None
-            return
+            return None, None
         pos, acc = self._prev[1], self._prev[2]
         end_v = (pos[-1] - pos[-2]) / self.dt
         pos = np.vstack([pos[s:], pos[-1] + end_v * self.dt * np.arange(1, s + 1)[:, None]])
         acc = np.vstack([acc[s:], np.zeros((s, 2))])
-        self._shifted = (pos, acc)
+        return pos, acc

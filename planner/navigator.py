@@ -215,12 +215,16 @@ class MPCPlanner:
             self._fields = (key, clear, goal)
         return self._fields[1], self._fields[2]
 
-    def guided_reference(self, inp: PlannerInput):
-        """(p_ref, v_ref, guide) for the MPC from the maneuver layer; the guide is p_ref."""
-        m = self.cfg.mpc
+    def _toward_path_ahead(self, inp: PlannerInput, distance: float) -> np.ndarray:
+        """(2,) from the drone to the point ``distance`` metres further along the path than its projection."""
         f = self.follower
-        ahead, _ = f.at(np.array([f.project(inp.position[:2]) + self.cfg.guide_look_ahead]))
-        d = ahead[0] - inp.position[:2]
+        ahead, _ = f.at(np.array([f.project(inp.position[:2]) + distance]))
+        return ahead[0] - inp.position[:2]
+
+    def guided_reference(self, inp: PlannerInput):
+        """(p_ref, v_ref) for the MPC from the maneuver layer (also its guide: the chosen maneuver)."""
+        m = self.cfg.mpc
+        d = self._toward_path_ahead(inp, self.cfg.guide_look_ahead)
         if np.hypot(*d) < 0.2:
             d = inp.goal[:2] - inp.position[:2]
         if np.hypot(*d) < 1e-6:
@@ -232,7 +236,7 @@ class MPCPlanner:
         z = float(inp.goal[2])
         p_ref = np.column_stack([man.positions[1:], np.full(m.horizon, z)])
         v_ref = np.column_stack([man.velocities[1:], np.zeros(m.horizon)])
-        return p_ref, v_ref, p_ref
+        return p_ref, v_ref
 
     def _heading(self, inp: PlannerInput, path_yaw: float | None) -> float | None:
         """The heading that best keeps the maneuver's direction and nearby moving obstacles in view (config)."""
@@ -268,7 +272,8 @@ class MPCPlanner:
         self._update_path(inp)
         guide = None
         if self.selector is not None and inp.occupancy is not None:
-            p_ref, v_ref, guide = self.guided_reference(inp)
+            p_ref, v_ref = self.guided_reference(inp)
+            guide = p_ref
         else:
             p_ref, v_ref = self.reference(inp)
         static = None
@@ -281,21 +286,19 @@ class MPCPlanner:
         res = self.mpc.solve(inp.stamp, inp.position, inp.velocity, inp.acceleration, p_ref, v_ref,
                              obstacles=inp.obstacles, static_points=static, heading=inp.yaw,
                              geofence=inp.geofence if self.cfg.use_geofence else None, guide=guide)
-        f = self.follower
-        ahead, _ = f.at(np.array([f.project(inp.position[:2]) + self.cfg.look_ahead]))
-        d = ahead[0] - inp.position[:2]
+        d = self._toward_path_ahead(inp, self.cfg.look_ahead)
         yaw = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else None
+        traj = res.trajectory
         if guide is not None:
             yaw = self._heading(inp, yaw)
-        traj = res.trajectory
-        if guide is None and self.cfg.mpc.fov_half_angle is not None:
+        elif self.cfg.mpc.fov_half_angle is not None:
             # The MPC keeps the motion inside the camera's view: the heading must lead it round, so it
             # faces the planned motion (the path ahead when slow).
             k = min(self.cfg.heading_lead_steps, len(traj.velocities) - 1)
             vp = traj.velocities[k][:2]
             if np.hypot(*vp) > self.cfg.heading_min_speed:
                 yaw = math.atan2(vp[1], vp[0])
-        elif guide is None:
+        else:
             g = inp.goal[:2] - inp.position[:2]
             if yaw is not None and np.hypot(*g) > 0.5:
                 to_goal = math.atan2(g[1], g[0])

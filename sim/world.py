@@ -565,32 +565,25 @@ class World:
         cam = self.scenario.camera
         T_true = self._camera_pose()
         seq = self.step_count // self.steps_per_frame
-        if not self.render_on:  # render=False: the camera's clock and pose, nothing drawn
-            self._frame = SensorFrame(depth=self._no_returns, color=None, intrinsics=self.intrinsics,
-                                      T_world_camera=self._odometry(T_true), stamp=self.time, seq=seq)
-            st = self.state()
-            self._truth = GroundTruth(stamp=self.time, seq=seq, obstacles=self._obstacle_truth(),
-                                      T_world_camera=T_true, drone_position=st.position, drone_velocity=st.velocity,
-                                      segmentation=None)
-            return
-        t0 = time.perf_counter()  # benchmark bookkeeping only: no result depends on it
-        out = render(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
-                     light_direction=self.light_direction)
-        self.render_wall_time += time.perf_counter() - t0
-        z = self._noise_model.apply(out.depth, self._rng_noise)
-        z[z < cam.min_range] = 0.0
-        z[z > min(cam.max_range, 65.535)] = 0.0
-        z *= np.float32(1000.0)
-        z += np.float32(0.5)  # round to the nearest millimetre on the cast
-        depth_mm = z.astype(np.uint16)
-        self._frame = SensorFrame(depth=depth_mm, color=out.color if cam.color else None,
-                                  intrinsics=self.intrinsics, T_world_camera=self._odometry(T_true),
-                                  stamp=self.time, seq=seq)
-        seg = None
-        if out.segmentation is not None:
-            s = out.segmentation
-            s = np.where((s >= -1) & (s + 1 < len(self._seg_lut)), s, -1)
-            seg = self._seg_lut[s + 1]
+        depth_mm, color, seg = self._no_returns, None, None  # render=False: the camera's clock and pose only
+        if self.render_on:
+            t0 = time.perf_counter()  # benchmark bookkeeping only: no result depends on it
+            out = render(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
+                         light_direction=self.light_direction)
+            self.render_wall_time += time.perf_counter() - t0
+            z = self._noise_model.apply(out.depth, self._rng_noise)
+            z[z < cam.min_range] = 0.0
+            z[z > min(cam.max_range, 65.535)] = 0.0
+            z *= np.float32(1000.0)
+            z += np.float32(0.5)  # round to the nearest millimetre on the cast
+            depth_mm = z.astype(np.uint16)
+            color = out.color if cam.color else None
+            if out.segmentation is not None:
+                s = out.segmentation
+                s = np.where((s >= -1) & (s + 1 < len(self._seg_lut)), s, -1)
+                seg = self._seg_lut[s + 1]
+        self._frame = SensorFrame(depth=depth_mm, color=color, intrinsics=self.intrinsics,
+                                  T_world_camera=self._odometry(T_true), stamp=self.time, seq=seq)
         st = self.state()
         self._truth = GroundTruth(stamp=self.time, seq=seq, obstacles=self._obstacle_truth(),
                                   T_world_camera=T_true, drone_position=st.position, drone_velocity=st.velocity,
