@@ -57,6 +57,12 @@ class EpisodeConfig:
     # a planner from the mapping; with a perception mode that needs no images (the oracles, static-only)
     # nothing is rendered then, and an episode runs several times faster
     static_map: str = "depth"
+    # camera periods between a frame's capture and its arrival at perception (stamps, poses and truth stay the
+    # capture's; moving obstacles are extrapolated to the planning time). 1: the camera and perception pipeline's
+    # delay, and with render_process the next frame renders in a second process while this one is perceived and
+    # planned on (results bit-identical to rendering in one process with the same latency)
+    frame_latency: int = 1
+    render_process: bool = True
 
 
 def map_config_for(scenario, robot_radius: float) -> MapConfig:
@@ -151,7 +157,8 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     t_wall = time.perf_counter()
     # images are needed by a depth-built map or by a perception module that looks at them (unknown ones do)
     render = cfg.static_map == "depth" or bool(getattr(perc, "uses_images", True))
-    world = World(sc, seed=seed, renderer=renderer, segmentation=False, render=render)
+    world = World(sc, seed=seed, renderer=renderer, segmentation=False, render=render,
+                  frame_latency=cfg.frame_latency, render_process=cfg.render_process and render and cfg.frame_latency > 0)
     planner = planner if planner is not None else default_planner(world.vehicle.radius)
     try:
         summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame)
@@ -181,12 +188,13 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     plan_every = max(1, int(round(1.0 / (cfg.plan_rate * control_dt))))
     log.add({"k": "header", "scenario": sc.name, "source": sc.source, "seed": seed, "perception": perc.name,
              "planner": type(planner).__name__, "duration": duration, "static_map": cfg.static_map,
+             "frame_latency": cfg.frame_latency,
              "rates": {"control": 1.0 / control_dt, "camera": sc.rates.camera, "plan": cfg.plan_rate,
                        "map": sc.rates.camera / cfg.map_every},
              "corridor": {"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
              "start": list(sc.drone.start), "goal": goal.tolist(), "map_resolution": vmap.cfg.resolution,
              "map_origin": list(vmap.cfg.origin),
-             "static": [o.to_json() for o in world.ground_truth().obstacles if o.kind == "static"],
+             "static": [o.to_json() for o in world.obstacle_truth() if o.kind == "static"],
              "people": [{"id": i, "height": round(w.height, 3)} for i, w in zip(world.person_ids, world.walkers)]})
 
     co = sc.corridor  # its walls are known: the planner keeps inside them (the map sees them only at a glance)
@@ -200,7 +208,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     next_snapshot = 0.0
     n_collisions = 0
     reason, time_to_goal = "timeout", None
-    frame, truth = world.latest_frame(), world.ground_truth()
+    frame, truth = world.latest_frame(), world.ground_truth()  # None until the first frame arrives (latency)
     k = 0
     while True:
         t = world.time
@@ -222,9 +230,9 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                                 stamp=frame.stamp)
                 map_ms = m.get("ms")
             n_frames += 1
-            q = world.T_world_body()
+            q = truth.T_world_body  # the drone at the frame's capture, as its truth and tracks
             people = [o for o in truth.obstacles if o.kind == "person"]
-            log.add({"k": "f", "t": round(t, 4), "p": r4(q[:3, 3]), "R": r4(q[:3, :3]), "tracks": po.tracks,
+            log.add({"k": "f", "t": round(frame.stamp, 4), "p": r4(q[:3, 3]), "R": r4(q[:3, :3]), "tracks": po.tracks,
                      "people": [{"id": o.id, "lo": r4(o.aabb_min), "hi": r4(o.aabb_max), "v": r4(o.velocity[:2])}
                                 for o in people],
                      "perc_ms": round(perc_ms, 3), "map_ms": None if map_ms is None else round(map_ms, 3),
@@ -235,7 +243,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                 log.add({"k": "map", "t": round(t, 4), "voxels": idx[above_floor].tolist()})
                 next_snapshot = math.inf if known_map else t + cfg.map_snapshot_period  # a known map never changes
             if on_frame is not None:
-                on_frame({"t": t, "frame": frame, "truth": truth, "perception": po, "map": vmap, "trajectory": traj,
+                on_frame({"t": frame.stamp, "frame": frame, "truth": truth, "perception": po, "map": vmap, "trajectory": traj,
                           "T_world_body": q, "path": getattr(planner, "path", None)})
 
         st = world.state()

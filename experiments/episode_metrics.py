@@ -49,6 +49,7 @@ def summarize(records: list[dict]) -> dict:
     return {
         "scenario": header["scenario"], "seed": header["seed"], "perception": header["perception"],
         "planner": header.get("planner"), "static_map": header.get("static_map", "depth"),
+        "frame_latency": header.get("frame_latency", 0),
         "success": reached and not collided,
         "reached_goal": reached, "collided": collided, "collision_count": len(collisions),
         "collisions": [{"t": c["t"], "kind": c["kind"], "other_id": c["other_id"]} for c in collisions],

@@ -18,10 +18,13 @@ import shutil
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import replace
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
+
+from experiments.episode import EpisodeConfig
 
 RESULTS = "results.jsonl"
 
@@ -69,12 +72,12 @@ def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
 
 
 def run_one(scenario: str, seed: int, perception: str, episodes_dir: str, keep_log: bool,
-            static_map: str = "depth") -> dict:
+            cfg: EpisodeConfig = EpisodeConfig()) -> dict:
     """One episode in a worker (module-level so process pools and Dask can ship it)."""
-    from experiments.episode import EpisodeConfig, run_episode
+    from experiments.episode import run_episode
 
     out = Path(episodes_dir) / f"seed_{seed:04d}"
-    s = run_episode(scenario, seed=seed, perception=perception, out=out, cfg=EpisodeConfig(static_map=static_map))
+    s = run_episode(scenario, seed=seed, perception=perception, out=out, cfg=cfg)
     if s["success"] and not keep_log:
         shutil.rmtree(out, ignore_errors=True)
     return s
@@ -138,9 +141,13 @@ class _Progress:
 
 def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs: int = 1,
               dask_address: str | None = None, keep_logs: bool = False, progress: bool = True,
-              static_map: str = "depth") -> dict:
+              cfg: EpisodeConfig = EpisodeConfig()) -> dict:
     """Run the seeds not yet in ``out/results.jsonl``; return the aggregate over all requested seeds.
-    static_map: "depth" (built from the camera) or "truth" (known geometry; experiments.episode)."""
+    cfg: every episode's settings (experiments.episode.EpisodeConfig); a folder holds results of one
+    static map and one frame latency only. Episodes render in a second process only when they run one
+    at a time here: with several at once the cores are busy already (the results are the same)."""
+    if jobs > 1 or dask_address:
+        cfg = replace(cfg, render_process=False)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / RESULTS
@@ -150,10 +157,12 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
     if clash:
         raise SweepError(f"{res_path}: holds results of perception {clash[0].get('perception')!r}, not "
                          f"{perception!r}; use another --out folder")
-    clash = [s for s in done.values() if s.get("static_map", "depth") != static_map]
-    if clash:
-        raise SweepError(f"{res_path}: holds results with the {clash[0].get('static_map', 'depth')!r} static map, "
-                         f"not {static_map!r}; use another --out folder")
+    for key, what, old_default in (("static_map", "static map", "depth"), ("frame_latency", "frame latency", 0)):
+        want = getattr(cfg, key)
+        clash = [s for s in done.values() if s.get(key, old_default) != want]
+        if clash:
+            raise SweepError(f"{res_path}: holds results with the {what} {clash[0].get(key, old_default)!r}, not "
+                             f"{want!r}; use another --out folder")
     from sim import load_scenario
 
     name = load_scenario(scenario).name
@@ -174,12 +183,12 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
 
     if todo:
         if dask_address:
-            _run_dask(dask_address, scenario, todo, perception, episodes_dir, keep_logs, static_map, finished)
+            _run_dask(dask_address, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished)
         elif jobs <= 1:
             for seed in todo:
-                finished(run_one(scenario, seed, perception, episodes_dir, keep_logs, static_map))
+                finished(run_one(scenario, seed, perception, episodes_dir, keep_logs, cfg))
         else:
-            _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, static_map, finished)
+            _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished)
     if bar:
         bar.close()
     agg = aggregate([done[s] for s in seeds], name, perception)
@@ -189,13 +198,13 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
     return agg
 
 
-def _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, static_map, finished) -> None:
+def _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished) -> None:
     import multiprocessing as mp
 
     # spawn: every worker starts clean (PyBullet's EGL plugin and numba do not like forked parents).
     ex = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"))
     try:
-        pending = {ex.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, static_map) for s in todo}
+        pending = {ex.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, cfg) for s in todo}
         while pending:
             ready, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in ready:
@@ -204,7 +213,7 @@ def _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, static_
         ex.shutdown(wait=True, cancel_futures=True)
 
 
-def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, static_map, finished) -> None:
+def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished) -> None:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -215,7 +224,7 @@ def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, stat
         raise SweepError(f"--dask: cannot connect to {address!r}: {e}") from None
     with client:
         # pure=False: every task gets a unique key, so sweeps sharing a scheduler never share results
-        futures = [client.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, static_map, pure=False)
+        futures = [client.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, cfg, pure=False)
                    for s in todo]
         for f in as_completed(futures):
             finished(f.result())

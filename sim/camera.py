@@ -106,9 +106,12 @@ class RenderOutput:
     segmentation: np.ndarray | None  # (H, W) int32 PyBullet body ids, -1 = background
 
 
-def render(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarray, renderer: str,
-           segmentation: bool, light_direction=None) -> RenderOutput:
-    """light_direction: optional (3,) world vector for PyBullet's light (both renderers honour
+def render_buffers(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarray, renderer: str,
+                   segmentation: bool, light_direction=None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The renderer's raw buffers: RGBA (H, W, 4) uint8, the depth buffer (H, W) float32 in
+    [0, 1], PyBullet body ids (H, W) int32 or None. ``decode_render`` turns them into images.
+
+    light_direction: optional (3,) world vector for PyBullet's light (both renderers honour
     it; EGL keeps the last one given for later frames of the client, so pass it every frame or
     never). Colour, ambient, diffuse and specular light settings have no effect under EGL."""
     flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
@@ -119,7 +122,15 @@ def render(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarray, rend
             K.width, K.height, view_matrix(T_world_camera),
             projection_matrix(K, sample_offset=PIXEL_SAMPLE_OFFSET[renderer]),
             renderer=r, flags=flags, shadow=0, physicsClientId=client, **light)
-    rgba = np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4)
-    z = linearize_depth(np.asarray(depth, dtype=np.float32).reshape(h, w))
-    s = np.asarray(seg, dtype=np.int32).reshape(h, w) if segmentation else None
-    return RenderOutput(depth=z, color=cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB), segmentation=s)
+    return (np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4), np.asarray(depth, dtype=np.float32).reshape(h, w),
+            np.asarray(seg, dtype=np.int32).reshape(h, w) if segmentation else None)
+
+
+def decode_render(rgba: np.ndarray, zbuf: np.ndarray, seg: np.ndarray | None) -> RenderOutput:
+    return RenderOutput(depth=linearize_depth(zbuf), color=cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB), segmentation=seg)
+
+
+def render(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarray, renderer: str,
+           segmentation: bool, light_direction=None) -> RenderOutput:
+    """Render one frame at the camera pose (``render_buffers``, then ``decode_render``)."""
+    return decode_render(*render_buffers(p, client, K, T_world_camera, renderer, segmentation, light_direction))

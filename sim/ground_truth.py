@@ -48,6 +48,7 @@ class GroundTruth:
     drone_position: np.ndarray
     drone_velocity: np.ndarray
     segmentation: np.ndarray | None
+    T_world_body: np.ndarray | None = None  # the drone's true pose at the frame's capture
 
     def to_json(self) -> dict:
         return {"stamp": round(self.stamp, 6), "seq": self.seq,

@@ -31,7 +31,7 @@ with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
 
 from dodt.frames import CameraIntrinsics, SensorFrame
-from sim.camera import load_egl, render
+from sim.camera import decode_render, load_egl, render_buffers
 from sim.controller import CascadedController, DroneState, Reference
 from sim.depth_noise import DepthNoiseModel
 from sim.ground_truth import STRUCTURE_ID, CollisionEvent, GroundTruth, ObstacleTruth
@@ -66,12 +66,26 @@ class _StaticBody:
     aabb_max: np.ndarray
 
 
+@dataclass
+class _Capture:
+    """A frame captured and not yet delivered (World.frame_latency)."""
+    seq: int
+    stamp: float
+    images: tuple | None  # (depth mm, colour, segmentation); None: still with the render process
+    T_odom: np.ndarray  # the pose the frame carries (odometry)
+    T_true: np.ndarray  # the camera's true pose
+    T_body: np.ndarray  # the drone's true pose
+    state: DroneState
+    obstacles: tuple[ObstacleTruth, ...]
+
+
 class World:
     """Build from a scenario and a seed; ``step`` with references; read frames and truth."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, renderer: str | None = None,
                  segmentation: bool | None = None, camera: bool = True,
-                 light_direction: tuple[float, float, float] | None = None, render: bool = True):
+                 light_direction: tuple[float, float, float] | None = None, render: bool = True,
+                 frame_latency: int = 0, render_process: bool = False):
         """camera=False skips rendering (frames and truth stay at their initial values); for
         control and planning experiments that need no images. render=False keeps the camera's
         clock but draws nothing: every camera period still gives a frame (pose, intrinsics, stamp,
@@ -79,7 +93,21 @@ class World:
         for planning against ground-truth perception at a fraction of the cost (an oracle episode of
         corridor.toml ran 7.5 times faster: 1.8 s against 13.6 s). light_direction (world frame,
         settable between frames as ``world.light_direction``) is passed to the renderer; None
-        keeps PyBullet's default light."""
+        keeps PyBullet's default light.
+
+        frame_latency: camera periods between a frame's capture and its delivery (``step``
+        returns it, ``latest_frame`` holds it; its stamp, pose and truth stay those of the
+        capture). 0: delivered at once. render_process (needs frame_latency >= 1 and render):
+        render in a second process (sim.render_process) while this one goes on; frames and
+        truth are bit-identical to rendering here with the same latency."""
+        if int(frame_latency) != frame_latency or frame_latency < 0:
+            raise ValueError(f"frame_latency: must be a whole number of camera periods >= 0, got {frame_latency!r}")
+        if render_process and not (render and camera and frame_latency >= 1):
+            raise ValueError("render_process: needs render=True, camera=True and frame_latency >= 1 (the render "
+                             "of one frame overlaps the processing of the frame before it)")
+        self.frame_latency = int(frame_latency)
+        self.render_process = bool(render_process)
+        self._render_proc = None
         self.light_direction = light_direction
         self.scenario = scenario
         self.camera_on = camera
@@ -122,7 +150,13 @@ class World:
             self._query_client = p.connect(p.DIRECT)
         c = self._client
         self.renderer = "tiny" if self.render_on else "none"
-        if self.render_on and self.requested_renderer in ("auto", "egl"):
+        if self.render_process:
+            from sim.render_process import RenderProcess
+
+            self._render_proc = RenderProcess(sc, self.seed, self.requested_renderer, self.segmentation_on,
+                                              self.light_direction)
+            self.renderer = f"{self._render_proc.renderer} (render process)"
+        elif self.render_on and self.requested_renderer in ("auto", "egl"):
             global _egl_owner
             other = _egl_owner() if _egl_owner is not None else None
             if other is not None and other is not self:
@@ -177,8 +211,10 @@ class World:
         self.min_clearance = {"static": CLEARANCE_CAP, "person": CLEARANCE_CAP, "structure": CLEARANCE_CAP}
         self.clearance_log: list[tuple[float, float, float, float]] = []  # t, static, person, structure
         self._frame: SensorFrame | None = None
-        self.render_wall_time = 0.0  # s spent inside the renderer (for benchmarks)
+        self._render_wall_time = 0.0  # s spent inside the renderer (for benchmarks)
         self._truth: GroundTruth | None = None
+        self._pending: list[_Capture] = []  # captured frames not yet delivered (frame_latency)
+        self.last_buffers = None  # the renderer's raw buffers of the last frame rendered in this process
         self._last_reference: Reference | None = None
         self._camera_path = self._make_camera_path()
         self._rotor_speed = np.full(4, math.sqrt(self.vehicle.mass * GRAVITY / (4 * self.vehicle.kf)))
@@ -214,6 +250,15 @@ class World:
                 except p.error:
                     pass
         self._client = self._query_client = None
+        if self._render_proc is not None:
+            self._render_proc.close()
+            self._render_proc = None
+
+    @property
+    def render_wall_time(self) -> float:
+        """Seconds spent inside the renderer (benchmarks only), in this process or the render process."""
+        rp = self._render_proc
+        return self._render_wall_time + (rp.render_wall_time if rp is not None else 0.0)
 
     def __enter__(self):
         return self
@@ -378,7 +423,10 @@ class World:
         return DroneState(position=np.array(pos), velocity=np.array(lin), R=R, omega=R.T @ np.array(ang))
 
     def T_world_body(self) -> np.ndarray:
-        pos, quat = p.getBasePositionAndOrientation(self.drone, physicsClientId=self._client)
+        return self._T_from_pose(*self._drone_pose())
+
+    @staticmethod
+    def _T_from_pose(pos, quat) -> np.ndarray:
         T = np.eye(4)
         T[:3, :3] = np.array(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
         T[:3, 3] = pos
@@ -419,8 +467,7 @@ class World:
             else:
                 self._physics_step()
             if self.camera_on and self.step_count % self.steps_per_frame == 0:
-                self._capture()
-                new_frame = self._frame
+                new_frame = self._capture() or new_frame
         return new_frame
 
     def advance(self, duration: float, reference: Reference | None = None) -> list[SensorFrame]:
@@ -544,9 +591,6 @@ class World:
 
     # ------------------------------------------------------------------ camera
 
-    def _camera_pose(self) -> np.ndarray:
-        return self.T_world_body() @ self.T_body_camera
-
     def _odometry(self, T_true: np.ndarray) -> np.ndarray:
         nz = self.scenario.noise
         if not nz.enabled or (nz.odom_position_std == 0 and nz.odom_rotation_std == 0):
@@ -561,35 +605,74 @@ class World:
             T[:3, :3] = (np.eye(3) + math.sin(angle) * Kx + (1 - math.cos(angle)) * Kx @ Kx) @ T[:3, :3]
         return T
 
-    def _capture(self) -> None:
-        cam = self.scenario.camera
-        T_true = self._camera_pose()
-        seq = self.step_count // self.steps_per_frame
-        depth_mm, color, seg = self._no_returns, None, None  # render=False: the camera's clock and pose only
-        if self.render_on:
-            t0 = time.perf_counter()  # benchmark bookkeeping only: no result depends on it
-            out = render(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
-                         light_direction=self.light_direction)
-            self.render_wall_time += time.perf_counter() - t0
-            z = self._noise_model.apply(out.depth, self._rng_noise)
-            z[z < cam.min_range] = 0.0
-            z[z > min(cam.max_range, 65.535)] = 0.0
-            z *= np.float32(1000.0)
-            z += np.float32(0.5)  # round to the nearest millimetre on the cast
-            depth_mm = z.astype(np.uint16)
-            color = out.color if cam.color else None
-            if out.segmentation is not None:
-                s = out.segmentation
-                s = np.where((s >= -1) & (s + 1 < len(self._seg_lut)), s, -1)
-                seg = self._seg_lut[s + 1]
-        self._frame = SensorFrame(depth=depth_mm, color=color, intrinsics=self.intrinsics,
-                                  T_world_camera=self._odometry(T_true), stamp=self.time, seq=seq)
-        st = self.state()
-        self._truth = GroundTruth(stamp=self.time, seq=seq, obstacles=self._obstacle_truth(),
-                                  T_world_camera=T_true, drone_position=st.position, drone_velocity=st.velocity,
-                                  segmentation=seg)
+    def _render_buffers(self, T_true: np.ndarray):
+        t0 = time.perf_counter()  # benchmark bookkeeping only: no result depends on it
+        out = render_buffers(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
+                             light_direction=self.light_direction)
+        self._render_wall_time += time.perf_counter() - t0
+        self.last_buffers = out
+        return out
 
-    def _obstacle_truth(self) -> tuple[ObstacleTruth, ...]:
+    def _finish_images(self, rgba: np.ndarray, zbuf: np.ndarray, seg_ids: np.ndarray | None):
+        """The renderer's buffers -> (depth in mm uint16 with the depth noise, colour or None,
+        segmentation as obstacle ids or None). Draws from the noise stream: call in capture order."""
+        cam = self.scenario.camera
+        out = decode_render(rgba, zbuf, seg_ids)
+        z = self._noise_model.apply(out.depth, self._rng_noise)
+        z[z < cam.min_range] = 0.0
+        z[z > min(cam.max_range, 65.535)] = 0.0
+        z *= np.float32(1000.0)
+        z += np.float32(0.5)  # round to the nearest millimetre on the cast
+        depth_mm = z.astype(np.uint16)
+        color = out.color if cam.color else None
+        seg = None
+        if out.segmentation is not None:
+            s = out.segmentation
+            s = np.where((s >= -1) & (s + 1 < len(self._seg_lut)), s, -1)
+            seg = self._seg_lut[s + 1]
+        return depth_mm, color, seg
+
+    def render_at(self, t: float, pos, quat):
+        """Pose the drone and the people as they are at sim time ``t`` and render: the renderer's
+        raw buffers (the render process's entry; nothing is stepped, no noise is drawn)."""
+        p.resetBasePositionAndOrientation(self.drone, list(pos), list(quat), physicsClientId=self._client)
+        for w in self.walkers:
+            w.apply(p, t)
+        return self._render_buffers(self._T_from_pose(pos, quat) @ self.T_body_camera)
+
+    def _capture(self) -> SensorFrame | None:
+        """Capture a frame now; deliver (and return) the one captured ``frame_latency`` camera
+        periods ago, if any."""
+        seq = self.step_count // self.steps_per_frame
+        pos, quat = self._drone_pose()
+        T_body = self._T_from_pose(pos, quat)
+        T_true = T_body @ self.T_body_camera
+        if self._render_proc is not None:
+            self._render_proc.submit(seq, self.time, pos, quat, self.light_direction)
+            images = None  # asked of the render process at delivery
+        elif self.render_on:
+            images = self._finish_images(*self._render_buffers(T_true))
+        else:  # render=False: the camera's clock and pose only
+            images = (self._no_returns, None, None)
+        self._pending.append(_Capture(seq, self.time, images, self._odometry(T_true), T_true, T_body, self.state(),
+                                      self.obstacle_truth()))
+        delivered = None
+        while self._pending and self._pending[0].seq <= seq - self.frame_latency:
+            c = self._pending.pop(0)
+            images = c.images
+            if images is None:  # rendered beside us; the noise is drawn here, in capture order as in one process
+                images = self._finish_images(*self._render_proc.result(c.seq))
+            depth_mm, color, seg = images
+            self._frame = SensorFrame(depth=depth_mm, color=color, intrinsics=self.intrinsics,
+                                      T_world_camera=c.T_odom, stamp=c.stamp, seq=c.seq)
+            self._truth = GroundTruth(stamp=c.stamp, seq=c.seq, obstacles=c.obstacles, T_world_camera=c.T_true,
+                                      drone_position=c.state.position, drone_velocity=c.state.velocity,
+                                      segmentation=seg, T_world_body=c.T_body)
+            delivered = self._frame
+        return delivered
+
+    def obstacle_truth(self) -> tuple[ObstacleTruth, ...]:
+        """Every obstacle's truth now (static ones and the people as posed at ``time``)."""
         out = []
         labels = {i + 1: o.kind for i, o in enumerate(self.scenario.obstacles)}
         for b in self.static_bodies:

@@ -1,5 +1,6 @@
 """The closed loop: one short episode with a person crossing the drone's way."""
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -93,6 +94,28 @@ def test_same_seed_gives_the_same_episode():
     b = run_episode(sc, seed=3, perception="oracle", cfg=EpisodeConfig(duration=2.0))
     a.pop("timing"), b.pop("timing")
     assert a == b
+
+
+def test_rendering_beside_the_loop_changes_nothing_and_frames_are_logged_at_capture(tmp_path):
+    """The default episode renders in a second process with one frame of latency: its log equals the
+    one-process run's record for record, and each frame record carries its capture's stamp and pose."""
+    sc = make_scenario(CROSSING)
+    cfg = EpisodeConfig(duration=1.5, frame_latency=1)
+    a = run_episode(sc, seed=3, perception="dodt", out=tmp_path / "a", cfg=replace(cfg, render_process=True))
+    b = run_episode(sc, seed=3, perception="dodt", out=tmp_path / "b", cfg=replace(cfg, render_process=False))
+    assert a["timing"]["renderer"].endswith("(render process)") and "process" not in b["timing"]["renderer"]
+    strip = lambda r: {k: v for k, v in r.items() if k not in ("perc_ms", "map_ms", "ms")}  # noqa: E731
+    ra, rb = read_log(tmp_path / "a" / "log.jsonl.gz"), read_log(tmp_path / "b" / "log.jsonl.gz")
+    assert [strip(r) for r in ra] == [strip(r) for r in rb]
+    assert ra[0]["frame_latency"] == 1 and a["frame_latency"] == 1
+    frames = [r for r in ra if r["k"] == "f"]
+    assert [f["t"] for f in frames[:3]] == [0.0, 0.0333, 0.0667] and frames[-1]["t"] == pytest.approx(1.5 - 1 / 30, abs=1e-3)
+    st_t = np.array([r["t"] for r in ra if r["k"] == "s"])
+    st_p = np.array([r["p"] for r in ra if r["k"] == "s"])
+    for f in frames[1:]:  # the pose logged with a frame is the drone's at that frame's capture, not at arrival
+        i = int(np.argmin(np.abs(st_t - f["t"])))
+        assert np.allclose(f["p"], st_p[i], atol=2e-4) and abs(st_t[i] - f["t"]) < 1e-3
+    assert not np.allclose(frames[-1]["p"], st_p[-1], atol=2e-4)  # the drone has moved on by the arrival
 
 
 def test_obstacles_are_extrapolated_to_the_planning_time():

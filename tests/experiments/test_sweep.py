@@ -16,6 +16,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
+from experiments.episode import EpisodeConfig
 from experiments.sweep import RESULTS, SweepError, parse_seeds, read_results, run_sweep, wilson
 
 # A 320x240 camera with the D435i's field of view (intrinsics scaled from 640x480) keeps episodes cheap.
@@ -409,13 +410,33 @@ def test_results_with_another_static_map_are_refused(scenarios, tmp_path):
     r = _cli("sweep", str(scenarios["short"]), "--perception", "oracle", "--seeds", "0:2", "--jobs", "1",
              "--map", "truth", "--out", str(out), "--quiet")
     assert r.returncode == 2, r.stderr
-    assert "holds results with the 'depth' static map, not 'truth'" in r.stderr
+    assert "holds results with the static map 'depth', not 'truth'" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and (out / RESULTS).read_text() == line + "\n"
     known = tmp_path / "known"
-    run_sweep(str(scenarios["short"]), [0, 1], "oracle", known, progress=False, static_map="truth")
+    run_sweep(str(scenarios["short"]), [0, 1], "oracle", known, progress=False, cfg=EpisodeConfig(static_map="truth"))
     assert all(s["static_map"] == "truth" for s in read_results(known / RESULTS).values())
     with pytest.raises(SweepError, match="static map"):
         run_sweep(str(scenarios["short"]), [2], "oracle", known, progress=False)
+
+
+def test_results_with_another_frame_latency_are_refused(scenarios, tmp_path):
+    """Frame latency changes every result: a folder holds one; a line from before the option counts as 0."""
+    out = tmp_path / "out"
+    out.mkdir()
+    line = json.dumps({"scenario": "short", "seed": 0, "perception": "oracle", "success": True})
+    (out / RESULTS).write_text(line + "\n")
+    r = _cli("sweep", str(scenarios["short"]), "--perception", "oracle", "--seeds", "0:2", "--jobs", "1",
+             "--out", str(out), "--quiet")
+    assert r.returncode == 2, r.stderr
+    assert "holds results with the frame latency 0, not 1" in r.stderr
+    assert (out / RESULTS).read_text() == line + "\n"
+    r = _cli("sweep", str(scenarios["short"]), "--perception", "oracle", "--seeds", "1:2", "--jobs", "1",
+             "--frame-latency", "0", "--out", str(out), "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert read_results(out / RESULTS)[1]["frame_latency"] == 0
+    r = _cli("sweep", str(scenarios["short"]), "--perception", "oracle", "--seeds", "0:2", "--frame-latency", "-1",
+             "--out", str(out), "--quiet")
+    assert r.returncode == 2 and "--frame-latency: must be" in r.stderr and "Traceback" not in r.stderr
 
 
 def test_bad_scenario_file_exits_2(tmp_path):

@@ -1,0 +1,69 @@
+"""Frame latency and rendering in a second process (sim.render_process)."""
+import numpy as np
+import pytest
+
+from sim import World, load_scenario
+from sim.controller import Reference
+from sim.render_process import RenderProcessError
+
+REF = Reference.hover([3.0, 0.3, 1.2])  # the drone climbs and moves: every frame has its own pose
+
+
+def _frames(steps: int, **kw) -> list:
+    """(world time when delivered, frame, truth) for each frame ``step`` returned."""
+    out = []
+    with World(load_scenario("corridor"), seed=3, **kw) as w:
+        for _ in range(steps):
+            f = w.step(REF)
+            if f is not None:
+                out.append((w.time, f, w.ground_truth()))
+    return out
+
+
+def _same(a, b) -> bool:
+    (_, fa, ta), (_, fb, tb) = a, b
+    return (fa.seq == fb.seq and fa.stamp == fb.stamp and np.array_equal(fa.depth, fb.depth)
+            and np.array_equal(fa.color, fb.color) and np.array_equal(fa.T_world_camera, fb.T_world_camera)
+            and np.array_equal(ta.T_world_camera, tb.T_world_camera) and np.array_equal(ta.T_world_body, tb.T_world_body)
+            and ta.stamp == fa.stamp and [o.to_json() for o in ta.obstacles] == [o.to_json() for o in tb.obstacles])
+
+
+def test_a_late_frame_is_the_frame_captured_then_delivered_one_period_later():
+    now = _frames(40, frame_latency=0)
+    late = _frames(40, frame_latency=1)
+    period = 1.0 / 30
+    assert [f.seq for _, f, _ in late] == list(range(len(late))) and len(late) == 10
+    by_seq = {f.seq: (t, f, tr) for t, f, tr in now}
+    for t, f, tr in late:
+        assert t == pytest.approx(f.stamp + period)  # arrives one camera period after its capture
+        if f.seq in by_seq:  # frame 0 is the one reset() captures, which step() never returns
+            assert _same(by_seq[f.seq], (t, f, tr))  # the same images, poses and truth as without latency
+    assert not _same(late[2], late[3])  # the test can tell frames apart
+
+
+def test_the_render_process_gives_bit_identical_frames():
+    here = _frames(40, frame_latency=1)
+    beside = _frames(40, frame_latency=1, render_process=True)
+    assert len(here) == len(beside) == 10
+    assert all(_same(a, b) for a, b in zip(here, beside))
+    assert here[-1][1].depth.any() and here[-1][1].color.any()
+
+
+def test_render_process_settings_are_checked():
+    sc = load_scenario("corridor")
+    with pytest.raises(ValueError, match="frame_latency >= 1"):
+        World(sc, seed=0, render_process=True)
+    with pytest.raises(ValueError, match="frame_latency: must be a whole number"):
+        World(sc, seed=0, frame_latency=-1)
+    with pytest.raises(ValueError, match="render_process: needs render=True"):
+        World(sc, seed=0, frame_latency=1, render=False, render_process=True)
+
+
+def test_a_dead_render_process_is_a_clear_error():
+    with World(load_scenario("corridor"), seed=0, frame_latency=1, render_process=True) as w:
+        w.step(REF)
+        w._render_proc._proc.kill()
+        w._render_proc._proc.wait()
+        with pytest.raises(RenderProcessError, match="render process"):
+            for _ in range(8):
+                w.step(REF)
