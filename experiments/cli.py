@@ -226,7 +226,6 @@ def _cmd_reproduce(args) -> int:
 
     if args.jobs < 1:
         raise UserError("--jobs: must be >= 1")
-    _check_frame_latency(args.frame_latency)
     reproduce(Path(args.out), quick=args.quick, jobs=args.jobs)
     return 0
 

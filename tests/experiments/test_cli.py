@@ -57,3 +57,14 @@ def test_scenarios_lists_every_shipped_scenario():
     assert r.returncode == 0
     names = {line.split()[0] for line in r.stdout.splitlines()}
     assert {"corridor", "circles", "follow_person", "wall_pass", "partial_obstacle", "static_only"} <= names
+
+
+def test_reproduce_options_reach_the_report(monkeypatch, tmp_path):
+    """The command line hands its options to experiments.reproduce (the report itself: test_reproduce)."""
+    import experiments.reproduce
+    from experiments.cli import main
+
+    calls = []
+    monkeypatch.setattr(experiments.reproduce, "reproduce", lambda out, quick, jobs: calls.append((out, quick, jobs)))
+    assert main(["reproduce", "--out", str(tmp_path / "rep"), "--quick", "--jobs", "1"]) == 0
+    assert calls == [(tmp_path / "rep", True, 1)]
