@@ -24,7 +24,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from experiments.episode import EpisodeConfig
+from experiments.episode import EpisodeConfig, run_episode
 
 RESULTS = "results.jsonl"
 
@@ -74,8 +74,6 @@ def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
 def run_one(scenario: str, seed: int, perception: str, episodes_dir: str, keep_log: bool,
             cfg: EpisodeConfig = EpisodeConfig()) -> dict:
     """One episode in a worker (module-level so process pools and Dask can ship it)."""
-    from experiments.episode import run_episode
-
     out = Path(episodes_dir) / f"seed_{seed:04d}"
     s = run_episode(scenario, seed=seed, perception=perception, out=out, cfg=cfg)
     if s["success"] and not keep_log:

@@ -1,11 +1,11 @@
 """Camera rendering in a second process, so that it runs beside the rest of a closed loop.
 
 The child builds its own copy of the world from the same scenario and seed (same bodies, same
-colours, same people's paths, same depth-noise stream) and renders nothing but what it is asked:
-for each captured frame the parent sends the sim time and the drone's pose, the child poses the
-drone and the people at that time, renders, adds the depth noise and sends the images back over
-a pipe. Requests are answered in order, so the noise stream is drawn in the same order as in one
-process and the images are bit-identical to rendering in the parent (tested).
+colours, same people's paths) and renders nothing but what it is asked: for each captured frame
+the parent sends the sim time and the drone's pose, the child poses the drone and the people at
+that time, renders, and sends the renderer's raw buffers back over a socket. Requests are answered
+in order; the parent decodes the buffers and draws the depth noise from its own stream in capture
+order, so the frames are bit-identical to rendering in the parent (tested).
 
 It pays off only when the parent has something to do while the child renders: the World asks for
 this with ``frame_latency >= 1`` (a frame is delivered one or more camera periods after its
