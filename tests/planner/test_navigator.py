@@ -95,3 +95,22 @@ def test_a_head_on_person_is_passed_without_switching_sides(side):
             lateral.append(np.sign(p[1] - q[1]))
     assert lateral and len(set(lateral)) == 1 and lateral[0] == -side  # one side, the roomier one
     assert p[0] > q[0] + 1.0  # passed
+
+
+@pytest.mark.parametrize("start", [(14.9, -0.6), (15.11, 0.12), (14.6, -0.1)])
+def test_a_drone_stopped_short_of_a_goal_near_the_end_wall_reaches_it(start):
+    """The goal lies 0.4 m from the end wall's face (x = 15.9), inside the path search's inflation: from a
+    hover 0.4-0.9 m short of it (where corridor episodes timed out), the plans bring the drone within the
+    closed loop's 0.4 m goal tolerance and keep it clear of the wall."""
+    m = VoxelMap(MapConfig(origin=(-0.5, -2.5, -0.1), size=(17.0, 5.0, 3.2)))
+    occ = np.zeros(tuple(m.dims), bool)
+    occ[:, :5, :] = occ[:, 45:, :] = True
+    occ[164:, :, :] = True  # x >= 15.9
+    m.set_known(occ)
+    pl = _planner()
+    p, v = np.array(start), np.zeros(2)
+    for k in range(40):
+        tr = pl.plan(_input(0.1 * k, p, v, occupancy=m))
+        p, v = tr.positions[1, :2], tr.velocities[1, :2]
+        assert p[0] < 15.9 - 0.3
+    assert np.hypot(*(p - GOAL[:2])) < 0.35 and np.hypot(*v) < 0.1
