@@ -166,18 +166,6 @@ class TrackConfig:
     # the coasting starts of dodt's tracks are that fast, nearly all static-labelled pieces of wall
     # seen from the moving drone, and dropping them there is not measured
     max_coast_speed: float = 2.5  # m/s
-    # ours: a detection whose points reach within this many pixels of the depth margin at the image's
-    # left or right edge is cut by the edge of the view: its centre and the mean of its points lie
-    # inward of the obstacle's, and they move across the view as the obstacle leaves it. Such a
-    # detection updates its track's position along the viewing ray only (the depth is sound, the side
-    # is not), and neither its velocity nor its size nor its label: leaving the view, a person's track
-    # keeps the velocity it had and coasts on it. A track measured whole over less than half the
-    # averaging window is updated as a whole still (entering the view, a person's cut boxes do move
-    # its way). 0: every detection updates as a whole (the paper).
-    # Corridor seed 4 (dodt, latency 1) before: a person walking head-on left the view at the side;
-    # the cut boxes turned the track's velocity 90 degrees toward the drone's escape side, the track
-    # coasted away there, and the drone steered into the person
-    edge_cut_px: int = 6
     history: int = 100  # states kept per track, ref history_size
     output_history: float = 3.0  # s of centre history in the output (the paper's figures show 3 s)
     size_smoothing: float = 0.3  # output size: exponential smoothing weight of the new detection (ours)

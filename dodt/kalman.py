@@ -99,17 +99,6 @@ class KalmanFilter:
         self.x = self.x + K @ y
         self.P = (np.eye(self.n) - K @ H) @ self.P
 
-    def update_along(self, direction: np.ndarray, value: float) -> None:
-        """Update with one measurement: the position's component along the horizontal unit vector
-        ``direction`` is ``value`` (noise r_pos). For an obstacle seen cut by the edge of the view,
-        whose range along the viewing ray is measured but whose lateral position is not."""
-        h = np.zeros(self.n)
-        h[:2] = direction[:2]
-        ph = self.P @ h
-        k = ph / (float(h @ ph) + self.cfg.r_pos)
-        self.x = self.x + k * (value - float(h @ self.x))
-        self.P = self.P - np.outer(k, ph)
-
     @property
     def position(self) -> np.ndarray:
         return self.x[:2]

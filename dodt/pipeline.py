@@ -134,28 +134,6 @@ class DODT:
 
     # ------------------------------------------------------------------ main entry
 
-    def _cut_by_edge(self, dets, K, T: np.ndarray) -> list[bool] | None:
-        """Per detection: do its points (the box's corners when it has none) reach within
-        ``track.edge_cut_px`` of the depth margin at the left or right edge of the image?"""
-        px = self.cfg.track.edge_cut_px
-        if px <= 0 or not dets:
-            return None
-        lo, hi = self.cfg.depth.margin + px, K.width - 1 - self.cfg.depth.margin - px
-        R, t = T[:3, :3], T[:3, 3]
-        out = []
-        for d in dets:
-            pts = d.points if len(d.points) else np.array([[x, y, z] for x in (d.lower[0], d.upper[0])
-                                                           for y in (d.lower[1], d.upper[1])
-                                                           for z in (d.lower[2], d.upper[2])])
-            pc = (np.asarray(pts, np.float64) - t) @ R
-            front = pc[:, 2] > 0.05
-            if not front.all():
-                out.append(True)  # partly beside or behind the camera
-                continue
-            u = K.fx * pc[:, 0] / pc[:, 2] + K.cx
-            out.append(bool(u.min() <= lo or u.max() >= hi))
-        return out
-
     def process(self, frame: SensorFrame) -> PerceptionResult:
         validate_frame(frame)
         t_start = time.perf_counter()
@@ -196,7 +174,7 @@ class DODT:
             self.tracker.predict(dt)
         pairs = self.tracker.associate(dets, T[:3, 3])
         t1 = time.perf_counter()
-        self.tracker.correct(dets, pairs, seq, stamp, cut=self._cut_by_edge(dets, frame.intrinsics, T), camera=T[:3, 3])
+        self.tracker.correct(dets, pairs, seq, stamp)
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:

@@ -69,8 +69,6 @@ class Track:
         # single false box would otherwise label a static obstacle dynamic for good).
         self.person_votes: deque[bool] = deque([det.is_person], maxlen=cfg.learned.person_window)
         self.coasting = False
-        self.cut = False  # this frame's detection was cut by the edge of the view (update_cut)
-        self.cut_since: float | None = None  # stamp of the first of the current run of cut updates
         self.missed = 0  # consecutive frames without a detection
         self.headings: deque[tuple[float, float]] = deque()  # (stamp, heading of the pseudo-measured velocity)
 
@@ -155,33 +153,11 @@ class Track:
         self.missed = 0
         self.person_votes.append(det.is_person)
         self.coasting = False
-        self.cut = False
-        self.cut_since = None
-
-    def update_cut(self, det: Detection, stamp: float, camera: np.ndarray) -> None:
-        """Update with a detection cut by the edge of the view (TrackConfig.edge_cut_px): its position
-        along the horizontal ray from ``camera`` only; the velocity, the size, the label and the history
-        the velocity is measured from stay as they were. The track is seen, not coasting."""
-        anchor = _anchor(det, self.cfg.kalman.position_source)
-        ray = anchor - np.asarray(camera, float)[:2]
-        d = float(np.hypot(ray[0], ray[1]))
-        if d > 1e-6:
-            u = ray / d
-            self.kf.update_along(u, float(u @ anchor))
-        self.det_size = det.size.copy()
-        self.count, self.spread = features(det)
-        self.last_seen = stamp
-        self.missed = 0
-        self.person_votes.append(det.is_person)
-        self.coasting = False
-        self.cut = True
-        if self.cut_since is None:
-            self.cut_since = stamp
 
     def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float) -> None:
         """clouds(seq) -> that frame's whole filtered cloud, or None."""
         cfg = self.cfg.identification
-        if self.coasting or self.cut:
+        if self.coasting:
             self.dynamic_history.append(self.geometric_dynamic)
             return  # no new points: the label stays
         speed = float(np.linalg.norm(self.kf.velocity))
@@ -306,25 +282,11 @@ class Tracker:
                 pairs += [(ut[a], ud[b]) for a, b in assign(cost, -np.inf)]
         return pairs
 
-    def correct(self, dets: list[Detection], pairs: list[tuple[int, int]], seq: int, stamp: float,
-                cut: list[bool] | None = None, camera: np.ndarray | None = None) -> None:
-        """Kalman updates of the matched tracks, coasting of the others, new tracks from the unmatched
-        detections. cut[j]: detection j is cut by the edge of the view (its track's update_cut, rays from
-        ``camera``); None: none is."""
+    def correct(self, dets: list[Detection], pairs: list[tuple[int, int]], seq: int, stamp: float) -> None:
         matched_t = {t for t, _ in pairs}
         matched_d = {d for _, d in pairs}
         for ti, di in pairs:
-            tr = self.tracks[ti]
-            # A track measured whole over less than half its averaging window has no velocity to keep:
-            # it is updated as a whole (a person entering the view at the side moves in its cut boxes'
-            # direction; one leaving it does not). Nor is a track kept on its old velocity for longer
-            # than it could coast: one walking along the edge of the view is measured again.
-            settled = len(tr.observations) > self.cfg.kalman.averaging_frames // 2
-            fresh = tr.cut_since is None or stamp - tr.cut_since <= self.cfg.track.coast_time
-            if cut is not None and cut[di] and camera is not None and settled and fresh:
-                self.tracks[ti].update_cut(dets[di], stamp, camera)
-            else:
-                self.tracks[ti].update(dets[di], seq, stamp)
+            self.tracks[ti].update(dets[di], seq, stamp)
         survivors = []
         for i, tr in enumerate(self.tracks):
             if i not in matched_t:

@@ -30,12 +30,6 @@ Cost of a candidate with positions p_k (k = 1..N, t_k = k dt):
     + sum_o [sum_h pi_h C_oh + lam max_h C_oh]
         C_oh = sum_k gamma_k [w_hit 1(e_k < 0) + w_near max(0, m_d - e_k)^2],
         e_k = |p_k - o_hk| - R_o - r - sigma_k,  gamma_k = 1 up to t_full, then exp(-(t_k - t_full)/t_fade)
-    + sum_o sum_k gamma_k w_close max(0, s_k - sqrt(2 a_close max(e_k, 0)))^2     (own prediction only)
-        s_k = -(v_k - u_ok) . (p_k - o_k) / |p_k - o_k|: the speed at which the gap to the obstacle closes
-        (u_ok its predicted velocity). A gap may close only as fast as the drone could still brake that
-        approach to a stop before contact: a walker turning, or a track's velocity a little off, then
-        leaves time to answer. Without it the drone passed people head-on at 2 m/s through 1-1.5 m of
-        gap, and a late turn of the walker or of its estimate was a collision (corridor dodt seed 4)
     + w_keep mean_{k <= K_keep} |p_k - q_k|^2       q: the previous choice, shifted to now (commitment)
     + w_acc mean_k |a_k|^2
 R_o: half the obstacle's longest horizontal side; r: the robot's horizontal circumscribed radius;
@@ -87,8 +81,6 @@ class ManeuverConfig:
     max_extent: float = 0.7  # m: an obstacle's radius is half its longest horizontal side, at most half this (a
     # walker's box grows with the stride and the swinging arms: 0.93 m measured; contacts in the corridor
     # episodes happened 0.4-0.7 m from the box centre, drone centre included)
-    w_close: float = 3.0  # per step and (m/s)^2 of closing speed beyond what a_close could brake
-    a_close: float = 1.5  # m/s^2, below the MPC's 2.5: the reaction delay and tracking error come first
     w_keep: float = 2.0  # per m^2, commitment to the previous choice
     keep_steps: int = 10  # over the first steps
     w_acc: float = 0.01  # per (m/s^2)^2
@@ -187,12 +179,10 @@ def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
 
 
 @njit(cache=True, nogil=True)
-def _score(P, V, A, stop, clear, goal, ox, oy, res, O, OV, R, owner, prior, own, n_obst, gamma, keep, r_robot,
-           m_s, m_d, w_goal, w_hit, w_static, w_near, worst, w_close, a_close, w_keep, w_acc, gx, gy, near_goal,
-           r_goal, m_goal, parts):
-    """Cost (C,) of candidates P (C, K, 2), velocities V; parts (C, 5) gets goal, static, dynamic, keep,
-    effort. Within near_goal of the goal (gx, gy) the static thresholds are r_goal and m_goal (what the goal
-    allows). own[o]: the hypothesis that is obstacle o's own prediction, with velocities OV[o] (K, 2)."""
+def _score(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamma, keep, r_robot, m_s, m_d,
+           w_goal, w_hit, w_static, w_near, worst, w_keep, w_acc, gx, gy, near_goal, r_goal, m_goal, parts):
+    """Cost (C,) of candidates P (C, K, 2); parts (C, 5) gets goal, static, dynamic, keep, effort. Within
+    near_goal of the goal (gx, gy) the static thresholds are r_goal and m_goal (what the goal allows)."""
     C, K = P.shape[0], P.shape[1]
     nx, ny = clear.shape
     H = O.shape[0]
@@ -244,19 +234,6 @@ def _score(P, V, A, stop, clear, goal, ox, oy, res, O, OV, R, owner, prior, own,
                     exp += prior[h] * ch[h]
                     mx = max(mx, ch[h])
             dyn += exp + worst * mx
-            h = own[o]
-            for k in range(K):
-                dx = P[c, k, 0] - O[h, k, 0]
-                dy = P[c, k, 1] - O[h, k, 1]
-                dist = math.sqrt(dx * dx + dy * dy)
-                if dist < 1e-9:
-                    continue
-                closing = -((V[c, k, 0] - OV[o, k, 0]) * dx + (V[c, k, 1] - OV[o, k, 1]) * dy) / dist
-                if closing <= 0.0:
-                    continue
-                ex = closing - math.sqrt(2.0 * a_close * max(dist - R[h, k], 0.0))
-                if ex > 0.0:
-                    dyn += gamma[h, k] * w_close * ex * ex
         kp = 0.0
         nk = min(keep.shape[0], K)
         for k in range(nk):
@@ -350,11 +327,9 @@ class ManeuverSelector:
                                                                                    resolution, goal_xy))
         sp = np.linalg.norm(V[:, -1], axis=1)
         stop = P[:, -1] + V[:, -1] * (sp / (2 * cfg.brake))[:, None]
-        O, R, G, owner, prior, own, OV = [], [], [], [], [], [], []
+        O, R, G, owner, prior = [], [], [], [], []
         for j, ob in enumerate(obstacles):
             paths, w = hypotheses(ob, self.t, cfg)
-            own.append(sum(len(x) for x in prior))  # its own prediction comes first among its hypotheses
-            OV.append(np.diff(np.vstack([np.asarray(ob.center, float)[None, :2], paths[0]]), axis=0) / dt)
             size = np.asarray(ob.size, float)
             rad = 0.5 * min(max(size[0], size[1]), cfg.max_extent) + self.r + ob.std_at(self.t)
             O.append(paths)
@@ -365,19 +340,16 @@ class ManeuverSelector:
         if O:
             O, R, G = np.concatenate(O), np.ascontiguousarray(np.concatenate(R)), np.concatenate(G)
             owner, prior = np.concatenate(owner).astype(np.int64), np.concatenate(prior)
-            own, OV = np.asarray(own, np.int64), np.ascontiguousarray(np.stack(OV))
         else:
             O, R, G = np.zeros((0, N, 2)), np.zeros((0, N)), np.zeros((0, N))
             owner, prior = np.zeros(0, np.int64), np.zeros(0)
-            own, OV = np.zeros(0, np.int64), np.zeros((0, N, 2))
         keep = prev_pos[1:cfg.keep_steps + 1] if prev_pos is not None else np.zeros((0, 2))
         parts = np.empty((len(P), 5))
-        J = _score(np.ascontiguousarray(P), np.ascontiguousarray(V), np.ascontiguousarray(A), stop, clear,
-                   goal_field, float(origin_xy[0]), float(origin_xy[1]), float(resolution), np.ascontiguousarray(O),
-                   OV, R, owner, prior, own, len(obstacles), G, np.ascontiguousarray(keep), self.r,
-                   cfg.static_margin, cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static, cfg.w_near,
-                   cfg.worst_case, cfg.w_close, cfg.a_close, cfg.w_keep, cfg.w_acc, float(goal_xy[0]),
-                   float(goal_xy[1]), cfg.near_goal, r_goal, m_goal, parts)
+        J = _score(np.ascontiguousarray(P), np.ascontiguousarray(A), stop, clear, goal_field,
+                   float(origin_xy[0]), float(origin_xy[1]), float(resolution), np.ascontiguousarray(O), R, owner,
+                   prior, len(obstacles), G, np.ascontiguousarray(keep), self.r, cfg.static_margin,
+                   cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static, cfg.w_near, cfg.worst_case, cfg.w_keep,
+                   cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]), cfg.near_goal, r_goal, m_goal, parts)
         b = int(np.argmin(J))
         pos, vel = np.vstack([p0, P[b]]), np.vstack([v0, V[b]])
         self._prev = (float(t0), pos, A[b].copy())
