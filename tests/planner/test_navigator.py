@@ -14,12 +14,13 @@ GOAL = np.array([15.5, 0.0, 1.2])
 FENCE = (np.array([0.0, -2.0]), np.array([16.0, 2.0]))
 
 
-def _corridor_map():
-    """The corridor's walls, known (16 x 4 m, as the closed loop's map bounds)."""
+def _corridor_map(end_wall: int = 165):
+    """The corridor's walls, known (16 x 4 m, as the closed loop's map bounds); the end wall's face at
+    x = -0.5 + 0.1 * end_wall (165: x = 16)."""
     m = VoxelMap(MapConfig(origin=(-0.5, -2.5, -0.1), size=(17.0, 5.0, 3.2)))
     occ = np.zeros(tuple(m.dims), bool)
     occ[:, :5, :] = occ[:, 45:, :] = True  # y < -2, y > 2
-    occ[:5, :, :] = occ[165:, :, :] = True  # x < 0, x > 16
+    occ[:5, :, :] = occ[end_wall:, :, :] = True  # x < 0, x > the end wall
     m.set_known(occ)
     return m
 
@@ -102,11 +103,7 @@ def test_a_drone_stopped_short_of_a_goal_near_the_end_wall_reaches_it(start):
     """The goal lies 0.4 m from the end wall's face (x = 15.9), inside the path search's inflation: from a
     hover 0.4-0.9 m short of it (where corridor episodes timed out), the plans bring the drone within the
     closed loop's 0.4 m goal tolerance and keep it clear of the wall."""
-    m = VoxelMap(MapConfig(origin=(-0.5, -2.5, -0.1), size=(17.0, 5.0, 3.2)))
-    occ = np.zeros(tuple(m.dims), bool)
-    occ[:, :5, :] = occ[:, 45:, :] = True
-    occ[164:, :, :] = True  # x >= 15.9
-    m.set_known(occ)
+    m = _corridor_map(end_wall=164)  # x >= 15.9
     pl = _planner()
     p, v = np.array(start), np.zeros(2)
     for k in range(40):
