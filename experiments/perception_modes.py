@@ -13,7 +13,8 @@ Modes:
 - ``oracle``: people from ground truth, as the DODT authors' simulations use a fake detector: a
   person is known while inside the camera's horizontal field of view within ``max_range``, and for
   ``memory`` seconds after leaving it (perfect tracking through occlusion), with exact position,
-  size and velocity.
+  size and velocity, and the acceleration the true velocity shows over the last 0.1 s (a tracker's
+  estimate, without its noise and lag).
 - ``oracle-360``: the same without the field of view: every person within ``max_range`` in any
   direction. Not a sensor anyone has; it measures the planner alone (with it, collisions are the
   planner's, since nothing comes from where the camera does not look).
@@ -22,6 +23,7 @@ Modes:
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -190,15 +192,30 @@ class OraclePerception:
     uses_ground_truth = True
     uses_images = False
 
-    def __init__(self, max_range: float = 5.0, memory: float = 1.0, all_around: bool = False):
+    def __init__(self, max_range: float = 5.0, memory: float = 1.0, all_around: bool = False,
+                 accel_window: float | None = 0.1):
         self.max_range = max_range
         self.memory = memory
         self.all_around = all_around
+        # s: each person's acceleration is the change of its true velocity over this window (the truth
+        # holds no acceleration); None: none (constant-velocity predictions, before)
+        self.accel_window = accel_window
         self.name = "oracle-360" if all_around else "oracle"
         self.reset()
 
     def reset(self) -> None:
         self._last_seen: dict[int, float] = {}
+        self._velocities: dict[int, deque] = {}  # id -> (stamp, true velocity) over accel_window
+
+    def _acceleration(self, oid: int, stamp: float, velocity: np.ndarray) -> np.ndarray:
+        if self.accel_window is None:
+            return np.zeros(3)
+        hist = self._velocities.setdefault(oid, deque())
+        hist.append((stamp, velocity.copy()))
+        while len(hist) > 2 and stamp - hist[1][0] >= self.accel_window - 1e-9:
+            hist.popleft()
+        dt = stamp - hist[0][0]
+        return (velocity - hist[0][1]) / dt if dt >= 0.5 * self.accel_window else np.zeros(3)
 
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
         if truth is None:
@@ -208,6 +225,7 @@ class OraclePerception:
         for o in truth.obstacles:
             if o.kind != "person":
                 continue
+            acc = self._acceleration(o.id, truth.stamp, o.velocity)
             # Seen when any part of the body is within the horizontal FOV cone and range.
             bearing, dist = bearing_and_distance(cam, heading, o.center)
             widen = math.atan2(0.5 * float(np.hypot(*o.size[:2])), max(dist, 1e-6))
@@ -218,7 +236,7 @@ class OraclePerception:
             if seen is None or truth.stamp - seen > self.memory:
                 continue
             preds.append(ObstaclePrediction(id=o.id, center=o.center.copy(), size=o.size.copy(),
-                                            velocity=o.velocity.copy()))
+                                            velocity=o.velocity.copy(), acceleration=acc))
             boxes.append((o.center.copy(), o.size.copy()))
             tracks.append({"id": o.id, "center": [round(float(x), 4) for x in o.center],
                            "size": [round(float(x), 4) for x in o.size],

@@ -1,4 +1,6 @@
 """experiments.perception_modes: the oracle modes' view rules, on hand-made ground truth."""
+import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -121,3 +123,27 @@ def test_moving_track_rule_height_test_is_unchanged_for_whole_boxes():
     assert p._moving(_track(coasting=False), frame)  # 1.7 m tall, 3 m ahead
     assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 0.6)), frame)  # a short box 3 m ahead, floor in view
     assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 2.6)), frame)  # taller than a person
+
+
+def test_oracle_acceleration_is_the_change_of_the_true_velocity():
+    """A person turning from +x to +y at 1 m/s over 0.3 s: the oracle reports the velocity's change over
+    its 0.1 s window; a person walking straight has none, and accel_window=None reports none."""
+    def truth(stamp, vel):
+        t = _truth(stamp, [AHEAD])
+        (o,) = t.obstacles
+        return SimpleNamespace(**{**vars(t), "obstacles": (replace(o, velocity=np.array(vel)),)})
+    dt = 1.0 / 30.0
+    turning = [(math.cos(a), math.sin(a), 0.0) for a in np.linspace(0.0, math.pi / 2, 10)]
+    for window, expect_turn in ((0.1, True), (None, False)):
+        p = OraclePerception(accel_window=window)
+        outs = [p.update(FRAME, truth(k * dt, v)) for k, v in enumerate(turning)]
+        (ob,) = outs[-1].obstacles
+        if expect_turn:
+            np.testing.assert_allclose(ob.acceleration, (np.array(turning[-1]) - turning[-4]) / (3 * dt), atol=1e-9)
+            assert np.hypot(*ob.acceleration[:2]) > 4.0  # turning at 5.2 rad/s at 1 m/s
+        else:
+            np.testing.assert_array_equal(ob.acceleration, np.zeros(3))
+    p = OraclePerception()
+    for k in range(6):
+        (ob,) = p.update(FRAME, truth(k * dt, (0.5, 0.0, 0.0))).obstacles
+    np.testing.assert_allclose(ob.acceleration, np.zeros(3), atol=1e-12)
