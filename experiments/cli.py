@@ -317,7 +317,7 @@ def _add_episode_options(parser: argparse.ArgumentParser) -> None:
     imported here: it loads the simulator)."""
     parser.add_argument("--map", choices=("depth", "truth"), default="depth",
                         help="static map: depth (built from the camera, default) or truth (the scenario's geometry "
-                             "known from the start; with oracle, oracle-360 or static-only nothing is rendered: a "
+                             "known from the start; with the oracles or static-only nothing is rendered: a "
                              "fast planner test)")
     parser.add_argument("--frame-latency", type=int, default=1, metavar="N",
                         help="camera periods between a frame's capture and its perception (default 1: the next "
@@ -363,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="fly one closed-loop episode headless; write summary.json and the episode log")
     r.add_argument("scenario", help="a scenario file, or the name of a shipped one (see `dodt-nav scenarios`)")
     r.add_argument("--seed", type=int, default=None, help="seed (default: the scenario's)")
-    r.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, static-only, or a DODT preset")
+    r.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, oracle-noisy, static-only, or a DODT preset")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--duration", type=float, default=None, help="time limit in seconds (default: the scenario's)")
     r.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
@@ -393,7 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
     w = sub.add_parser("sweep", help="run many seeds in parallel; resumable; rates with Wilson intervals; CI gate")
     w.add_argument("scenario", help="a scenario file, or the name of a shipped one")
     w.add_argument("--seeds", default="0:20", help="start:stop, a number, or a comma list (default 0:20)")
-    w.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, static-only, or a DODT preset")
+    w.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, oracle-noisy, static-only, or a DODT preset")
     w.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
     w.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
     w.add_argument("--max-collision-rate", type=float, default=None,

@@ -147,3 +147,29 @@ def test_oracle_acceleration_is_the_change_of_the_true_velocity():
     for k in range(6):
         (ob,) = p.update(FRAME, truth(k * dt, (0.5, 0.0, 0.0))).obstacles
     np.testing.assert_allclose(ob.acceleration, np.zeros(3), atol=1e-12)
+
+
+def test_noisy_oracle_velocity_error_has_its_size_and_repeats():
+    """oracle-noisy: the truth's positions and sizes, velocities off by a wandering error of about
+    NOISY_ORACLE_VELOCITY_NOISE per axis; the same episode after reset() gives the same errors."""
+    from experiments.perception_modes import NOISY_ORACLE_VELOCITY_NOISE
+    p = make_perception("oracle-noisy")
+    assert p.name == "oracle-noisy" and "oracle-noisy" in known_modes() and not p.uses_images
+
+    def run():
+        p.reset()
+        errs = []
+        for k in range(900):  # 30 s at 30 Hz, one person walking at +0.5 m/s in view
+            (ob,) = p.update(FRAME, _truth(k / 30.0, [AHEAD])).obstacles
+            np.testing.assert_allclose(ob.center, [3.0, 0.0, 0.85])
+            errs.append(ob.velocity - np.array([0.5, 0.0, 0.0]))
+        return np.array(errs)
+
+    e = run()
+    assert np.all(e[:, 2] == 0.0)
+    assert 0.5 * NOISY_ORACLE_VELOCITY_NOISE < e[:, :2].std() < 1.5 * NOISY_ORACLE_VELOCITY_NOISE
+    assert np.corrcoef(e[:-1, 0], e[1:, 0])[0, 1] > 0.85 and np.corrcoef(e[:-1, 1], e[1:, 1])[0, 1] > 0.85
+    assert abs(np.corrcoef(e[:-90, 0], e[90:, 0])[0, 1]) < 0.3  # 3 s apart: unrelated
+    np.testing.assert_array_equal(run(), e)
+    exact = make_perception("oracle").update(FRAME, _truth(0.0, [AHEAD])).obstacles[0]
+    np.testing.assert_array_equal(exact.velocity, [0.5, 0.0, 0.0])
