@@ -18,9 +18,9 @@ Modes:
 - ``oracle-360``: the same without the field of view: every person within ``max_range`` in any
   direction. Not a sensor anyone has; it measures the planner alone (with it, collisions are the
   planner's, since nothing comes from where the camera does not look).
-- ``oracle-noisy``: ``oracle`` with a wandering error on each person's velocity, of the size of
-  DODT's velocity error (``NOISY_ORACLE_VELOCITY_NOISE``): how much a planner suffers from the
-  velocity errors of a real tracker alone, everything else being perfect.
+- ``oracle-noisy``: ``oracle`` with a wandering error on each person's velocity, of a tracker's
+  size (``NOISY_ORACLE_VELOCITY_NOISE``: a larger median than DODT's, a like tail): how much a
+  planner suffers from the velocity errors of a real tracker alone, everything else being perfect.
 - ``static-only``: no dynamic perception; people enter the map as static obstacles.
 """
 from __future__ import annotations

@@ -132,6 +132,7 @@ def test_oracle_acceleration_is_the_change_of_the_true_velocity():
         t = _truth(stamp, [AHEAD])
         (o,) = t.obstacles
         return SimpleNamespace(**{**vars(t), "obstacles": (replace(o, velocity=np.array(vel)),)})
+
     dt = 1.0 / 30.0
     turning = [(math.cos(a), math.sin(a), 0.0) for a in np.linspace(0.0, math.pi / 2, 10)]
     for window, expect_turn in ((0.1, True), (None, False)):
