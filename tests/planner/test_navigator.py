@@ -111,3 +111,22 @@ def test_a_drone_stopped_short_of_a_goal_near_the_end_wall_reaches_it(start):
         p, v = tr.positions[1, :2], tr.velocities[1, :2]
         assert p[0] < 15.9 - 0.3
     assert np.hypot(*(p - GOAL[:2])) < 0.35 and np.hypot(*v) < 0.1
+
+
+def test_a_walker_just_passed_does_not_turn_the_camera_from_a_fast_flight():
+    """Flying on at 1.9 m/s past a walker now 1 m behind to its right, the camera keeps where the drone
+    goes in view: the walker is watched where it and the drone will be in 0.5 and 1 s, by then 2-3 m
+    apart. Watched from where the drone is now (the earlier rule), the walker outweighs the motion and the
+    camera turns back to it, as on corridor seed 126 (dodt), where the drone then flew into a person ahead."""
+    p, v = np.array([5.0, 0.0]), np.array([1.9, 0.0])
+    person = ObstaclePrediction(id=1, center=np.array([4.2, -0.6, 0.9]), size=np.array([0.5, 0.6, 1.8]),
+                                velocity=np.array([-0.2, 0.5, 0.0]))
+    off = {}
+    for name, kw in (("now", {}), ("earlier", dict(watch_times=(0.0, 0.0)))):
+        pl = _planner(**kw)
+        tr = pl.plan(_input(0.0, p, v, [person]))
+        ahead = pl.last_maneuver.positions[10]
+        assert ahead[0] - p[0] > 1.2  # flying on
+        off[name] = _bearing_off(tr.yaw, p, ahead)
+    assert off["now"] < pl.cfg.camera_half_fov - 0.1
+    assert off["earlier"] > pl.cfg.camera_half_fov + 0.1
