@@ -196,11 +196,27 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
     return agg
 
 
+def _exit_with_parent(parent_pid: int, period: float = 0.5) -> None:
+    """Pool worker initializer: a daemon thread ends this worker at once when the sweep that started it is
+    gone. A sweep killed alone (kill PID, a job scheduler's SIGTERM or SIGKILL to the main process) otherwise
+    leaves its workers running: each finishes its episode and the ones queued behind it, results nobody
+    writes, then sleeps for good holding its memory (seen: 10 CPU-minutes and 0.6 GB per orphan)."""
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(period)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished) -> None:
     import multiprocessing as mp
 
     # spawn: every worker starts clean (PyBullet's EGL plugin and numba do not like forked parents).
-    ex = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"))
+    ex = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=_exit_with_parent,
+                             initargs=(os.getpid(),))
     try:
         pending = {ex.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, cfg) for s in todo}
         while pending:

@@ -162,6 +162,59 @@ def test_wilson_interval_edge_cases():
 
 # --- resume, parallel back ends -------------------------------------------------------------------
 
+def _pool_workers(parent: int) -> list[int]:
+    """The process-pool workers (spawned interpreters) whose parent is ``parent``, from /proc."""
+    out = []
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            stat = open(f"/proc/{d}/stat").read()
+            cmd = open(f"/proc/{d}/cmdline", "rb").read()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == parent and b"spawn_main" in cmd:
+            out.append(int(d))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads the process table from /proc")
+def test_pool_workers_end_when_the_sweep_alone_is_killed(scenarios, tmp_path):
+    """kill -9 of the sweep's own process (not its group): its workers notice and end within seconds
+    instead of running the queued episodes for nobody and then sleeping for good."""
+    cmd = _cmd("sweep", str(scenarios["short"]), "--seeds", "0:6", "--jobs", "2", "--perception", "oracle",
+               "--out", str(tmp_path / "sweep"), "--quiet")
+    p = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    workers = []
+    try:
+        deadline = time.monotonic() + 120
+        while len(workers) < 2:
+            assert p.poll() is None, f"the sweep ended (status {p.returncode}) before its workers were seen"
+            assert time.monotonic() < deadline, "no two pool workers within 120 s"
+            time.sleep(0.05)
+            workers = _pool_workers(p.pid)
+        p.kill()  # the main process only
+        p.wait(timeout=30)
+        deadline = time.monotonic() + 20
+        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(w) for w in workers), "pool workers outlived the killed sweep by 20 s"
+    finally:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)  # whatever is left of the group
+        except ProcessLookupError:
+            pass
+
+
 @pytest.mark.slow
 def test_resume_after_kill_9_runs_each_seed_once_with_the_same_results(scenarios, reference, tmp_path):
     ref_out, _, ref_results = reference
