@@ -221,6 +221,24 @@ def _cmd_sweep(args) -> int:
     return 0
 
 
+def _cmd_compare(args) -> int:
+    from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison
+
+    if args.fail_if_worse is not None and not 0.0 < args.fail_if_worse <= 1.0:
+        raise UserError("--fail-if-worse: must be a significance level in (0, 1]")
+    try:
+        c = compare_sweeps(args.base, args.new)
+    except CompareError as e:
+        raise UserError(str(e)) from None
+    print(format_comparison(c))
+    worse = len(c.to_failure) > len(c.to_success)
+    if args.fail_if_worse is not None and worse and c.p_value < args.fail_if_worse:
+        print(f"the change is worse than the baseline: p = {c.p_value:.3g} < --fail-if-worse {args.fail_if_worse}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
 def _cmd_reproduce(args) -> int:
     from experiments.reproduce import reproduce
 
@@ -404,6 +422,15 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_episode_options(w)
     w.set_defaults(func=_cmd_sweep)
+
+    cp = sub.add_parser("compare", help="pair two sweeps seed by seed: seeds turned each way, exact sign test; "
+                                        "CI gate on a significant regression")
+    cp.add_argument("base", help="the baseline's sweep folder (or its results.jsonl)")
+    cp.add_argument("new", help="the change's sweep folder (or its results.jsonl)")
+    cp.add_argument("--fail-if-worse", type=float, default=None, metavar="ALPHA",
+                    help="exit with status 1 when more seeds turned to failure than to success and the sign "
+                         "test's p is below ALPHA (e.g. 0.05)")
+    cp.set_defaults(func=_cmd_compare)
 
     rep = sub.add_parser("reproduce", help="Table I, Table II and the corridor sweeps in one report.md")
     rep.add_argument("--out", required=True, help="output folder (rerun to resume the sweeps)")

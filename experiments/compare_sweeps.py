@@ -1,0 +1,129 @@
+"""Seed-by-seed comparison of two sweeps: did a change make the closed loop better, worse, or neither?
+
+Two sweeps over the same seeds of a scenario (a baseline and a change) are paired seed by seed. The
+outcome of one corridor episode turns on small things (a replan 0.1 s apart, a track one frame
+older), so any change of the planner or the perception turns 10-45 of 200 seeds each way; the two
+success rates alone cannot tell a real gain from that churn. The paired question can: among the
+seeds whose outcome differs, are those turned to success more than a fair coin would give? That is
+McNemar's exact test, a two-sided sign test on the discordant seeds; seeds with the same outcome in
+both sweeps say nothing about the change and do not enter it.
+
+A sweep folder is what ``dodt-nav sweep --out`` writes; only its ``results.jsonl`` is read.
+"""
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from experiments.sweep import RESULTS, read_results
+
+
+class CompareError(ValueError):
+    """The two sweeps cannot be compared (a folder without results, no seed in common)."""
+
+
+@dataclass(frozen=True)
+class SweepComparison:
+    base: str
+    new: str
+    seeds: tuple[int, ...]  # run in both sweeps
+    base_success: int
+    new_success: int
+    to_success: tuple[int, ...]  # failed in the baseline, succeeded with the change
+    to_failure: tuple[tuple[int, str], ...]  # (seed, the change's failure reason)
+    p_value: float  # two-sided exact sign test on the discordant seeds
+    counts: dict  # {"collision": (base, new), "timeout": (base, new)}
+    median_speed: tuple[float | None, float | None]  # of the successful episodes, m/s
+    only_in_base: int = 0
+    only_in_new: int = 0
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def verdict(self) -> str:
+        return verdict(len(self.to_success), len(self.to_failure), self.p_value)
+
+
+def sign_test_p(k: int, n: int) -> float:
+    """Two-sided exact binomial test of k successes in n fair trials (the doubled smaller tail, at most 1)."""
+    if not 0 <= k <= n:
+        raise ValueError(f"k must lie in [0, n], got k={k}, n={n}")
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(min(k, n - k) + 1)) / 2.0 ** n
+    return min(1.0, 2.0 * tail)
+
+
+def verdict(up: int, down: int, p: float, alpha: float = 0.05) -> str:
+    if up == down == 0:
+        return "no seed changed outcome"
+    if p >= alpha:
+        return f"no clear difference (p = {p:.3g} >= {alpha:g}: within the seed-to-seed churn)"
+    return f"{'better' if up > down else 'worse'} (p = {p:.3g})"
+
+
+def _load(folder: Path) -> dict[int, dict]:
+    path = folder / RESULTS if folder.is_dir() else folder
+    if not path.is_file():
+        raise CompareError(f"{folder}: no {RESULTS} (a folder written by dodt-nav sweep --out, or the file itself)")
+    rows = read_results(path)
+    if not rows:
+        raise CompareError(f"{path}: no finished episode in it")
+    return rows
+
+
+def _median_speed(rows) -> float | None:
+    v = [float(r["mean_speed"]) for r in rows if r.get("success") and r.get("mean_speed") is not None]
+    return round(statistics.median(v), 3) if v else None
+
+
+def compare_sweeps(base: str | Path, new: str | Path) -> SweepComparison:
+    """Pair the two sweeps' episodes by seed (sweep folders or results files)."""
+    a, b = _load(Path(base)), _load(Path(new))
+    common = sorted(set(a) & set(b))
+    if not common:
+        raise CompareError(f"{base} and {new} have no seed in common")
+    warnings = []
+    for key in ("scenario", "static_map", "frame_latency"):
+        va, vb = {a[s].get(key) for s in common}, {b[s].get(key) for s in common}
+        if va != vb:
+            warnings.append(f"the sweeps differ in {key}: {sorted(map(str, va))} against {sorted(map(str, vb))}")
+    ok_a = {s: bool(a[s].get("success")) for s in common}
+    ok_b = {s: bool(b[s].get("success")) for s in common}
+    up = tuple(s for s in common if ok_b[s] and not ok_a[s])
+    down = tuple((s, str(b[s].get("failure_reason") or "failed")) for s in common if ok_a[s] and not ok_b[s])
+    counts = {k: (sum(bool(a[s].get(f)) for s in common), sum(bool(b[s].get(f)) for s in common))
+              for k, f in (("collision", "collided"), ("timeout", "timeout"))}
+    return SweepComparison(
+        base=str(base), new=str(new), seeds=tuple(common), base_success=sum(ok_a.values()),
+        new_success=sum(ok_b.values()), to_success=up, to_failure=down,
+        p_value=sign_test_p(len(up), len(up) + len(down)), counts=counts,
+        median_speed=(_median_speed(a[s] for s in common), _median_speed(b[s] for s in common)),
+        only_in_base=len(set(a) - set(b)), only_in_new=len(set(b) - set(a)), warnings=tuple(warnings))
+
+
+def format_comparison(c: SweepComparison) -> str:
+    n = len(c.seeds)
+    pct = lambda k: f"{k} ({100.0 * k / n:.1f} %)"  # noqa: E731
+    lines = [f"{n} seeds in both sweeps" + (f" ({c.only_in_base} only in the baseline, {c.only_in_new} only in the "
+                                             f"change, left out)" if c.only_in_base or c.only_in_new else ""),
+             "",
+             "| | baseline | change |",
+             "| --- | --- | --- |",
+             f"| success | {pct(c.base_success)} | {pct(c.new_success)} |"]
+    for k, (x, y) in c.counts.items():
+        lines.append(f"| {k} | {pct(x)} | {pct(y)} |")
+    fmt = lambda v: "-" if v is None else f"{v:.2f} m/s"  # noqa: E731
+    lines += [f"| median speed of successes | {fmt(c.median_speed[0])} | {fmt(c.median_speed[1])} |", "",
+              f"turned to success ({len(c.to_success)}): " + (", ".join(map(str, c.to_success)) or "none"),
+              f"turned to failure ({len(c.to_failure)}): "
+              + (", ".join(f"{s} ({why})" for s, why in c.to_failure) or "none"),
+              f"sign test on the {len(c.to_success) + len(c.to_failure)} seeds that changed: two-sided p = "
+              f"{c.p_value:.3g}",
+              f"verdict: {c.verdict}"]
+    lines += [f"warning: {w}" for w in c.warnings]
+    return "\n".join(lines)
+
+
+__all__ = ["CompareError", "SweepComparison", "compare_sweeps", "format_comparison", "sign_test_p", "verdict"]

@@ -1,0 +1,103 @@
+"""dodt-nav compare: two sweeps paired seed by seed, the exact sign test, the regression gate."""
+import json
+
+import pytest
+from scipy.stats import binomtest
+
+from experiments.cli import main
+from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison, sign_test_p
+
+
+def _sweep(folder, outcomes, scenario="corridor", cut_last_line=False):
+    """A results.jsonl as dodt-nav sweep writes it: outcomes maps seed -> 'ok', 'collision' or 'timeout'."""
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = []
+    for seed, o in outcomes.items():
+        lines.append(json.dumps({"scenario": scenario, "seed": seed, "perception": "dodt", "static_map": "depth",
+                                 "frame_latency": 1, "success": o == "ok", "collided": o == "collision",
+                                 "timeout": o == "timeout", "failure_reason": None if o == "ok" else o,
+                                 "mean_speed": 1.0 + seed / 100}))
+    text = "\n".join(lines) + "\n"
+    if cut_last_line:
+        text += '{"scenario": "corridor", "seed": 99, "succ'  # a line cut short by a kill
+    (folder / "results.jsonl").write_text(text)
+    return folder
+
+
+@pytest.mark.parametrize("k,n", [(0, 0), (0, 1), (3, 10), (5, 10), (22, 67), (45, 67), (0, 20), (12, 30)])
+def test_sign_test_is_the_exact_two_sided_binomial_test(k, n):
+    expected = 1.0 if n == 0 else binomtest(k, n, 0.5).pvalue
+    assert sign_test_p(k, n) == pytest.approx(expected, rel=1e-12)
+
+
+def test_sign_test_rejects_impossible_counts():
+    with pytest.raises(ValueError, match="k must lie"):
+        sign_test_p(5, 3)
+
+
+def test_seeds_are_paired_and_only_the_changed_ones_count(tmp_path):
+    base = {s: "ok" for s in range(40)}
+    new = dict(base)
+    for s in range(10):  # ten seeds fail in the baseline and succeed with the change
+        base[s] = "collision"
+    new[20] = "timeout"  # one goes the other way
+    base[50] = "ok"  # only in the baseline: left out
+    c = compare_sweeps(_sweep(tmp_path / "a", base), _sweep(tmp_path / "b", new, cut_last_line=True))
+    assert c.seeds == tuple(range(40)) and c.only_in_base == 1 and c.only_in_new == 0
+    assert (c.base_success, c.new_success) == (30, 39)
+    assert c.to_success == tuple(range(10)) and c.to_failure == ((20, "timeout"),)
+    assert c.p_value == pytest.approx(binomtest(10, 11).pvalue)
+    assert c.counts == {"collision": (10, 0), "timeout": (0, 1)}
+    assert c.verdict.startswith("better")
+    text = format_comparison(c)
+    assert "turned to failure (1): 20 (timeout)" in text and "1 only in the baseline" in text
+    # the same seeds the other way round: worse, same p
+    r = compare_sweeps(tmp_path / "b" / "results.jsonl", tmp_path / "a")
+    assert r.verdict.startswith("worse") and r.p_value == c.p_value
+
+
+def test_a_small_difference_is_called_churn_not_a_gain(tmp_path):
+    base = {s: ("ok" if s % 4 else "collision") for s in range(100)}  # 75 %
+    new = dict(base)
+    for s in (0, 4, 8, 12, 16, 20, 24):  # 7 seeds to success ...
+        new[s] = "ok"
+    for s in (1, 2, 3, 5):  # ... 4 to failure: 78 % against 75 %
+        new[s] = "collision"
+    c = compare_sweeps(_sweep(tmp_path / "a", base), _sweep(tmp_path / "b", new))
+    assert c.new_success - c.base_success == 3
+    assert c.p_value > 0.5 and c.verdict.startswith("no clear difference")
+
+
+def test_sweeps_of_different_scenarios_are_compared_with_a_warning(tmp_path):
+    c = compare_sweeps(_sweep(tmp_path / "a", {0: "ok", 1: "ok"}),
+                       _sweep(tmp_path / "b", {0: "ok", 1: "ok"}, scenario="circles"))
+    assert c.warnings and "scenario" in c.warnings[0]
+    assert c.verdict == "no seed changed outcome"
+
+
+def test_nothing_to_compare_is_a_clear_error(tmp_path):
+    a = _sweep(tmp_path / "a", {0: "ok"})
+    with pytest.raises(CompareError, match="no seed in common"):
+        compare_sweeps(a, _sweep(tmp_path / "b", {1: "ok"}))
+    with pytest.raises(CompareError, match="no results.jsonl"):
+        compare_sweeps(a, tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "results.jsonl").write_text("")
+    with pytest.raises(CompareError, match="no finished episode"):
+        compare_sweeps(a, tmp_path / "empty")
+
+
+def test_the_cli_gate_fails_only_a_significant_regression(tmp_path, capsys):
+    good = _sweep(tmp_path / "good", {s: "ok" for s in range(30)})
+    bad = _sweep(tmp_path / "bad", {s: ("collision" if s < 12 else "ok") for s in range(30)})
+    slightly = _sweep(tmp_path / "slightly", {s: ("collision" if s < 2 else "ok") for s in range(30)})
+    assert main(["compare", str(good), str(bad), "--fail-if-worse", "0.05"]) == 1  # 12 to failure, none back
+    assert "worse than the baseline" in capsys.readouterr().err
+    assert main(["compare", str(good), str(slightly), "--fail-if-worse", "0.05"]) == 0  # 2 of 2: p = 0.5
+    assert main(["compare", str(bad), str(good), "--fail-if-worse", "0.05"]) == 0  # better passes
+    assert main(["compare", str(good), str(bad)]) == 0  # no gate asked
+    assert "verdict: worse" in capsys.readouterr().out
+    assert main(["compare", str(good), str(bad), "--fail-if-worse", "2"]) == 2
+    assert main(["compare", str(good), str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert "--fail-if-worse" in err and "nowhere" in err and "Traceback" not in err
