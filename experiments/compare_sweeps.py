@@ -12,7 +12,6 @@ A sweep folder is what ``dodt-nav sweep --out`` writes; only its ``results.jsonl
 """
 from __future__ import annotations
 
-import math
 import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,13 +45,14 @@ class SweepComparison:
 
 
 def sign_test_p(k: int, n: int) -> float:
-    """Two-sided exact binomial test of k successes in n fair trials (the doubled smaller tail, at most 1)."""
+    """Two-sided exact binomial test of k successes in n fair trials (scipy's binomtest; 1 when n = 0)."""
     if not 0 <= k <= n:
         raise ValueError(f"k must lie in [0, n], got k={k}, n={n}")
     if n == 0:
         return 1.0
-    tail = sum(math.comb(n, i) for i in range(min(k, n - k) + 1)) / 2.0 ** n
-    return min(1.0, 2.0 * tail)
+    from scipy.stats import binomtest  # half a second to import: only when a test is made
+
+    return float(binomtest(k, n, 0.5).pvalue)
 
 
 def verdict(up: int, down: int, p: float, alpha: float = 0.05) -> str:

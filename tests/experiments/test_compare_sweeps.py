@@ -2,7 +2,6 @@
 import json
 
 import pytest
-from scipy.stats import binomtest
 
 from experiments.cli import main
 from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison, sign_test_p
@@ -24,9 +23,12 @@ def _sweep(folder, outcomes, scenario="corridor", cut_last_line=False):
     return folder
 
 
-@pytest.mark.parametrize("k,n", [(0, 0), (0, 1), (3, 10), (5, 10), (22, 67), (45, 67), (0, 20), (12, 30)])
-def test_sign_test_is_the_exact_two_sided_binomial_test(k, n):
-    expected = 1.0 if n == 0 else binomtest(k, n, 0.5).pvalue
+@pytest.mark.parametrize("k,n,expected", [
+    (0, 0, 1.0), (0, 1, 1.0), (3, 10, 11 / 32), (5, 10, 1.0), (22, 67, 62178877096773739 / 2**63),
+    (45, 67, 62178877096773739 / 2**63), (0, 20, 1 / 2**19), (12, 30, 194129627 / 2**29),
+])
+def test_sign_test_is_the_exact_two_sided_binomial_test(k, n, expected):
+    # expected: twice the smaller tail, sum_{i <= min(k, n - k)} C(n, i) / 2^n, at most 1, as exact fractions
     assert sign_test_p(k, n) == pytest.approx(expected, rel=1e-12)
 
 
@@ -46,7 +48,7 @@ def test_seeds_are_paired_and_only_the_changed_ones_count(tmp_path):
     assert c.seeds == tuple(range(40)) and c.only_in_base == 1 and c.only_in_new == 0
     assert (c.base_success, c.new_success) == (30, 39)
     assert c.to_success == tuple(range(10)) and c.to_failure == ((20, "timeout"),)
-    assert c.p_value == pytest.approx(binomtest(10, 11).pvalue)
+    assert c.p_value == pytest.approx(3 / 256)  # 10 of 11 changed seeds one way: 2 (1 + 11) / 2^11
     assert c.counts == {"collision": (10, 0), "timeout": (0, 1)}
     assert c.verdict.startswith("better")
     text = format_comparison(c)
