@@ -248,8 +248,8 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
-def _detector_data(args) -> Path:
-    """The dataset folder, generated split by split where missing (seeds never shared)."""
+def _detector_data(args, splits: tuple[str, ...] = ("train", "val")) -> Path:
+    """The dataset folder, its ``splits`` generated where missing (seeds never shared)."""
     import numpy as np
 
     from experiments.detector import dataset
@@ -264,6 +264,8 @@ def _detector_data(args) -> Path:
         raise UserError("--images-per-seed: must be >= 1")
     data = Path(args.data)
     for split, seeds in (("train", train_seeds), ("val", val_seeds)):
+        if split not in splits:
+            continue
         if (data / f"{split}.npz").is_file():
             with np.load(data / f"{split}.npz") as z:
                 meta = json.loads(str(z["meta"])) if "meta" in z else {}
@@ -304,7 +306,7 @@ def _cmd_eval_detector(args) -> int:
 
     model = Path(args.model) if args.model else SHIPPED_MODEL
     load_record(model)  # a missing or corrupt model stops here with its name
-    data = _detector_data(args)
+    data = _detector_data(args, splits=("val",))  # evaluation needs no training images
     r = average_precision(model, data / "val.npz", max_distance=args.max_distance, nms_iou=args.nms_iou,
                           min_visible_px=args.min_visible_px)
     keys = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()

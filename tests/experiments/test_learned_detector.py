@@ -158,16 +158,17 @@ def test_evaluation_ignores_fragments_only_when_asked():
     assert evaluate_detections(both, gt, operating_threshold=0.5, min_visible_px=400)["precision"] == 1.0
 
 
-def test_eval_detector_renders_missing_data_and_refuses_other_seeds(tmp_path, capsys):
+def test_eval_detector_renders_only_the_missing_validation_split_and_refuses_other_seeds(tmp_path, capsys):
     data = str(tmp_path / "data")
-    opts = ["--data", data, "--val-seeds", "1000:1001", "--images-per-seed", "1"]
-    assert main(["eval-detector", "--train-seeds", "0:1", *opts]) == 0
+    opts = ["--data", data, "--images-per-seed", "1"]
+    assert main(["eval-detector", "--val-seeds", "1000:1001", *opts]) == 0
     out = capsys.readouterr().out
     assert "person_detector.onnx on" in out and "ap50" in out
-    assert (tmp_path / "data" / "train.npz").is_file() and (tmp_path / "data" / "val.npz").is_file()
-    assert main(["eval-detector", "--train-seeds", "0:2", *opts]) == 2
-    assert "train.npz was rendered from other seeds" in capsys.readouterr().err
-    assert main(["eval-detector", "--train-seeds", "0:1001", *opts]) == 2  # overlapping splits
+    assert (tmp_path / "data" / "val.npz").is_file()
+    assert not (tmp_path / "data" / "train.npz").exists()  # evaluation needs no training images
+    assert main(["eval-detector", "--val-seeds", "1000:1002", *opts]) == 2
+    assert "val.npz was rendered from other seeds" in capsys.readouterr().err
+    assert main(["eval-detector", "--val-seeds", "1000:1001", "--train-seeds", "0:1001", *opts]) == 2
     assert "overlap: 1000" in capsys.readouterr().err
 
 
