@@ -172,6 +172,17 @@ def test_eval_detector_renders_only_the_missing_validation_split_and_refuses_oth
     assert "overlap: 1000" in capsys.readouterr().err
 
 
+def test_train_detector_refuses_a_training_split_rendered_from_other_seeds(tmp_path, capsys):
+    pytest.importorskip("torch")
+    from experiments.detector.dataset import generate
+
+    generate(tmp_path / "data", "train", [0], 1)
+    opts = ["--data", str(tmp_path / "data"), "--val-seeds", "1000:1001", "--images-per-seed", "1", "--epochs", "1"]
+    assert main(["train-detector", "--train-seeds", "0:2", *opts]) == 2
+    assert "train.npz was rendered from other seeds" in capsys.readouterr().err
+    assert not (tmp_path / "data" / "val.npz").exists()  # refused before rendering anything else
+
+
 def test_map_is_freed_under_a_person_label_only_while_it_moves(monkeypatch):
     """A person-labelled track that stands (e.g. a person box lifted onto a wall) is avoided by the
     planner but does not free the map; a walking one, or one dynamic by DODT's voting, does."""
