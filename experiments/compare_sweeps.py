@@ -16,6 +16,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from experiments.environment import differences, fingerprint
 from experiments.sweep import RESULTS, read_results
 
 
@@ -78,6 +79,29 @@ def _median_speed(rows) -> float | None:
     return round(statistics.median(v), 3) if v else None
 
 
+def _environment_warnings(a: dict[int, dict], b: dict[int, dict], common: list[int]) -> list[str]:
+    """Outcomes agree bit for bit only within one machine and installation: say when the two sweeps
+    (or the episodes within one) ran in different ones."""
+    out = []
+    envs = {}
+    for name, rows in (("baseline", a), ("change", b)):
+        prints = {fingerprint(rows[s].get("environment")): rows[s].get("environment") for s in common}
+        if None in prints:
+            out.append(f"some episodes of the {name} record no environment (run before episodes recorded it): "
+                       f"whether both sweeps ran on the same machine and installation is unknown")
+        known = [e for f, e in prints.items() if f is not None]
+        if len(known) > 1:
+            out.append(f"the {name}'s episodes ran in {len(known)} environments ({'; '.join(differences(*known[:2]))})")
+        envs[name] = known[0] if known else None
+    if envs["baseline"] is not None and envs["change"] is not None:
+        diff = differences(envs["baseline"], envs["change"])
+        if diff:
+            out.append("the sweeps ran in different environments (" + "; ".join(diff) + "): outcomes differ across "
+                       "machines and installations by themselves, so the churn measured here is not the change's "
+                       "alone; sweep the baseline again where the change ran")
+    return out
+
+
 def compare_sweeps(base: str | Path, new: str | Path) -> SweepComparison:
     """Pair the two sweeps' episodes by seed (sweep folders or results files)."""
     a, b = _load(Path(base)), _load(Path(new))
@@ -89,6 +113,7 @@ def compare_sweeps(base: str | Path, new: str | Path) -> SweepComparison:
         va, vb = {a[s].get(key) for s in common}, {b[s].get(key) for s in common}
         if va != vb:
             warnings.append(f"the sweeps differ in {key}: {sorted(map(str, va))} against {sorted(map(str, vb))}")
+    warnings += _environment_warnings(a, b, common)
     ok_a = {s: bool(a[s].get("success")) for s in common}
     ok_b = {s: bool(b[s].get("success")) for s in common}
     up = tuple(s for s in common if ok_b[s] and not ok_a[s])

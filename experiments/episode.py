@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from dodt.geometry import wrap_angle
+from experiments.environment import environment
 from experiments.episode_log import EpisodeLog, r4
 from experiments.episode_metrics import summarize
 from experiments.perception_modes import PerceptionModule, bearing_and_distance, horizontal_view, make_perception
@@ -169,6 +170,9 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     summary["timing"]["wall_s"] = round(wall, 2)
     summary["timing"]["real_time_factor"] = round(summary["sim_time"] / wall, 3) if wall > 0 else None
     summary["timing"]["renderer"] = world.renderer
+    # what computed it: outcomes agree bit for bit within one environment, not across them (the
+    # renderer, not where it ran: a render process gives the same frames)
+    summary["environment"] = {**environment(), "renderer": world.renderer.split(" (")[0]}
     if out is not None:
         (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary

@@ -24,6 +24,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
+from experiments.environment import fingerprint
 from experiments.episode import EpisodeConfig, run_episode
 
 RESULTS = "results.jsonl"
@@ -254,6 +255,22 @@ def _dist(values) -> dict:
             "p75": round(float(q[3]), 3), "p95": round(float(q[4]), 3), "max": round(float(a.max()), 3)}
 
 
+def _environments(summaries: list[dict]) -> list[dict]:
+    """The distinct environments the episodes ran in (one, unless a sweep was resumed elsewhere)."""
+    out = {}
+    for s in summaries:
+        env = s.get("environment")
+        if env:
+            out.setdefault(fingerprint(env), env)
+    return list(out.values())
+
+
+def _describe(env: dict) -> str:
+    pk = ", ".join(f"{k} {v}" for k, v in (env.get("packages") or {}).items() if v)
+    return (f"Python {env.get('python')}, {pk}; processor {env.get('cpu_model')} (compiled for {env.get('cpu')}, "
+            f"NumPy SIMD {'/'.join(env.get('numpy_simd') or []) or 'baseline'}); renderer {env.get('renderer')}")
+
+
 def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
     n = len(summaries)
     counts = {"success": sum(s["success"] for s in summaries), "collision": sum(s["collided"] for s in summaries),
@@ -267,6 +284,7 @@ def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
         "min_clearance_person": _dist(s["min_clearance"]["person"] for s in summaries),
         "min_clearance_overall": _dist(s["min_clearance"]["overall"] for s in summaries),
         "planner_fallbacks": int(sum(s["planner_stats"]["fallbacks"] for s in summaries)),
+        "environments": _environments(summaries),
         "per_seed": [{"seed": s["seed"], "success": s["success"], "collided": s["collided"],
                       "collisions": s["collision_count"], "timeout": s["timeout"],
                       "failure_reason": s["failure_reason"], "time_to_goal": s["time_to_goal"],
@@ -286,8 +304,12 @@ def markdown(agg: dict) -> str:
         d = agg[key]
         if d["n"]:
             L.append(f"| {label} | {d['n']} | {d['mean']} | {d['p5']} | {d['median']} | {d['p95']} | {d['max']} |")
-    L += ["", f"Planner fallbacks over all episodes: {agg['planner_fallbacks']}", "",
-          "| seed | outcome | collisions | time to goal [s] | min clearance [m] |", "|---|---|---|---|---|"]
+    L += ["", f"Planner fallbacks over all episodes: {agg['planner_fallbacks']}", ""]
+    envs = agg.get("environments", [])
+    if envs:
+        L += [("Environment: " if len(envs) == 1 else f"Environments ({len(envs)}, outcomes may differ between them): ")
+              + "; ".join(_describe(e) for e in envs), ""]
+    L += ["| seed | outcome | collisions | time to goal [s] | min clearance [m] |", "|---|---|---|---|---|"]
     for s in agg["per_seed"]:
         outcome = "success" if s["success"] else (s["failure_reason"] or "failure")
         ttg = "-" if s["time_to_goal"] is None else f"{s['time_to_goal']:.2f}"

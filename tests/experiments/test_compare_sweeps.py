@@ -7,15 +7,23 @@ from experiments.cli import main
 from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison, sign_test_p
 
 
-def _sweep(folder, outcomes, scenario="corridor", cut_last_line=False):
-    """A results.jsonl as dodt-nav sweep writes it: outcomes maps seed -> 'ok', 'collision' or 'timeout'."""
+ENV = {"python": "3.11.7", "packages": {"numpy": "2.4.6", "numba": "0.68.1"}, "cpu": "znver5",
+       "cpu_model": "AMD EPYC", "numpy_simd": ["AVX2", "AVX512F"], "renderer": "egl"}
+
+
+def _sweep(folder, outcomes, scenario="corridor", cut_last_line=False, env=ENV):
+    """A results.jsonl as dodt-nav sweep writes it: outcomes maps seed -> 'ok', 'collision' or 'timeout';
+    env: the environment each episode records (None: none recorded, as results written before it was)."""
     folder.mkdir(parents=True, exist_ok=True)
     lines = []
     for seed, o in outcomes.items():
-        lines.append(json.dumps({"scenario": scenario, "seed": seed, "perception": "dodt", "static_map": "depth",
-                                 "frame_latency": 1, "success": o == "ok", "collided": o == "collision",
-                                 "timeout": o == "timeout", "failure_reason": None if o == "ok" else o,
-                                 "mean_speed": 1.0 + seed / 100}))
+        row = {"scenario": scenario, "seed": seed, "perception": "dodt", "static_map": "depth",
+               "frame_latency": 1, "success": o == "ok", "collided": o == "collision",
+               "timeout": o == "timeout", "failure_reason": None if o == "ok" else o,
+               "mean_speed": 1.0 + seed / 100}
+        if env is not None:
+            row["environment"] = env(seed) if callable(env) else env
+        lines.append(json.dumps(row))
     text = "\n".join(lines) + "\n"
     if cut_last_line:
         text += '{"scenario": "corridor", "seed": 99, "succ'  # a line cut short by a kill
@@ -75,6 +83,25 @@ def test_sweeps_of_different_scenarios_are_compared_with_a_warning(tmp_path):
                        _sweep(tmp_path / "b", {0: "ok", 1: "ok"}, scenario="circles"))
     assert c.warnings and "scenario" in c.warnings[0]
     assert c.verdict == "no seed changed outcome"
+
+
+def test_sweeps_from_different_machines_or_installations_are_compared_with_a_warning(tmp_path):
+    same = compare_sweeps(_sweep(tmp_path / "a", {0: "ok", 1: "collision"}),
+                          _sweep(tmp_path / "b", {0: "collision", 1: "ok"}))
+    assert same.warnings == ()
+    other = {**ENV, "cpu": "skylake-avx512", "packages": {**ENV["packages"], "numpy": "2.4.5"}}
+    c = compare_sweeps(tmp_path / "a", _sweep(tmp_path / "c", {0: "collision", 1: "ok"}, env=other))
+    assert len(c.warnings) == 1
+    w = c.warnings[0]
+    assert "different environments" in w and "cpu znver5 against skylake-avx512" in w
+    assert "numpy 2.4.6 against 2.4.5" in w and "numba" not in w  # only what differs is named
+    assert "warning: the sweeps ran in different environments" in format_comparison(c)
+    # one sweep resumed on another machine: its episodes disagree among themselves
+    mixed = _sweep(tmp_path / "d", {0: "ok", 1: "ok"}, env=lambda seed: other if seed else ENV)
+    assert any("change's episodes ran in 2 environments" in w for w in compare_sweeps(tmp_path / "a", mixed).warnings)
+    # results written before episodes recorded their environment: unknown, said so
+    old = compare_sweeps(_sweep(tmp_path / "e", {0: "ok", 1: "ok"}, env=None), tmp_path / "a")
+    assert len(old.warnings) == 1 and "baseline record no environment" in old.warnings[0]
 
 
 def test_nothing_to_compare_is_a_clear_error(tmp_path):

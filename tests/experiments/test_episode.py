@@ -94,6 +94,10 @@ def test_same_seed_gives_the_same_episode():
     b = run_episode(sc, seed=3, perception="oracle", cfg=EpisodeConfig(duration=2.0))
     a.pop("timing"), b.pop("timing")
     assert a == b
+    # each summary says what computed it, since outcomes agree only within one environment
+    env = a["environment"]
+    assert env["packages"]["numpy"] == np.__version__ and env["renderer"] in ("egl", "tiny")
+    assert env["cpu"] and env["python"].count(".") == 2
 
 
 def test_rendering_beside_the_loop_changes_nothing_and_frames_are_logged_at_capture(tmp_path):

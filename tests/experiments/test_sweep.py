@@ -14,6 +14,7 @@ import sys
 import time
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pytest
 
 from experiments.episode import EpisodeConfig
@@ -416,6 +417,10 @@ def test_summary_files_hold_the_rates_table_and_one_row_per_seed(reference):
         assert cells[1] == ("success" if s["success"] else s["failure_reason"])
         assert cells[2] == str(s["collision_count"])
         assert cells[3] == ("-" if s["time_to_goal"] is None else f"{s['time_to_goal']:.2f}")
+    # one machine and installation ran them all: one environment, named in both files
+    assert summary["environments"] == [results[SEEDS[0]]["environment"]]
+    env_lines = [line for line in lines if line.startswith("Environment: ")]
+    assert len(env_lines) == 1 and f"numpy {np.__version__}" in env_lines[0]
 
 
 @pytest.mark.parametrize("args, fragment", [
