@@ -2,16 +2,26 @@
 
 A closed-loop episode is bit for bit the same on one machine and installation, but not across
 them: its outcome turns on small things (a replan 0.1 s apart, a track one frame older), and the
-same corridor seeds gave 75.0 % and 65.5 % successes on two machines. Which difference moves them
-is not known. Measured here, none of these did (corridor, dodt, the same episodes bit for bit):
-numba compiling for haswell instead of the host's znver5 with NumPy's AVX-512 kernels turned off
-(seeds 0-19), and OpenBLAS's Haswell kernels instead of its SkylakeX ones (seeds 0-9), although
-each changes some results of the libraries by themselves. Left: the library versions and builds,
-and Mesa's software renderer. Every episode summary records what is known of its environment, so
-that sweeps from different ones are known to be so when compared (``dodt-nav compare`` warns).
+same corridor seeds and code gave 75.0 % and 65.5 % successes on two machines. Measured on one
+machine (corridor, dodt, against a sweep of the same seeds there):
+
+- the same episodes bit for bit: numba compiling for haswell instead of the host's znver5, with
+  NumPy's AVX-512 kernels off (seeds 0-19); NumPy 2.3.5 / SciPy 1.16.3 instead of 2.4.6 / 1.17.1
+  (seeds 0-7);
+- every episode otherwise: OpenBLAS's SkylakeX kernels, which it picks by itself on that
+  processor, instead of the Haswell ones the machine's environment named (OPENBLAS_CORETYPE;
+  seeds 0-9, 4 outcomes changed); Mesa's software rasteriser (llvmpipe, behind PyBullet's EGL
+  plugin), which compiles its shaders for the host processor, with its SIMD off (GALLIUM_NOSSE=1:
+  some 110 pixels of each 640x480 depth frame come out otherwise, at triangle edges, valid
+  against invalid; seeds 0-4, 3 outcomes changed).
+
+So the record holds the processor, the BLAS kernels, the renderer and Mesa's version beside the
+packages, and the variables set by hand that change how they compute; sweeps from different
+environments are known to be so when compared (``dodt-nav compare`` warns).
 """
 from __future__ import annotations
 
+import os
 import platform
 from functools import lru_cache
 from importlib import metadata
@@ -25,7 +35,11 @@ SIMD_LEVELS = ("SSE42", "AVX2", "FMA3", "AVX512F", "AVX512_SKX", "AVX512_ICL", "
                "ASIMD", "SVE")
 
 # the keys that must agree for two episodes to be expected to agree bit for bit
-FINGERPRINT_KEYS = ("python", "packages", "cpu", "numpy_simd", "renderer")
+FINGERPRINT_KEYS = ("python", "packages", "cpu", "numpy_simd", "blas_core", "mesa", "overrides", "renderer")
+
+# environment variables that change how the libraries compute (set by hand, for tests like the above)
+OVERRIDE_PREFIXES = ("GALLIUM_", "GALLIVM_", "LP_", "NUMBA_CPU_", "NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES",
+                     "OPENBLAS_", "OPENCV_CPU_DISABLE", "OMP_NUM_THREADS")
 
 
 def _version(name: str) -> str | None:
@@ -67,6 +81,45 @@ def _numpy_simd() -> list[str]:
     return [k for k in SIMD_LEVELS if feats.get(k)]
 
 
+def _blas_core() -> str | None:
+    """The kernel set NumPy's OpenBLAS runs on this processor (it picks one at load time, unless
+    OPENBLAS_CORETYPE names one), or None where NumPy carries no OpenBLAS of that kind."""
+    import ctypes
+    import glob
+
+    import numpy
+
+    for path in sorted(glob.glob(os.path.join(os.path.dirname(numpy.__file__), os.pardir, "numpy.libs", "*openblas*"))):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename"):
+            fn = getattr(lib, name, None)
+            if fn is not None:
+                fn.restype = ctypes.c_char_p
+                return fn().decode("ascii", "replace")
+    return None
+
+
+def _mesa() -> str | None:
+    """The installed Mesa package's version where the system says (Debian's dpkg), else None."""
+    import shutil
+    import subprocess
+
+    if not shutil.which("dpkg-query"):
+        return None
+    for pkg in ("libgl1-mesa-dri", "libegl-mesa0"):
+        try:
+            r = subprocess.run(["dpkg-query", "-W", "-f", "${Version}", pkg], capture_output=True, text=True,
+                               timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        if r.returncode == 0 and r.stdout.strip():
+            return r.stdout.strip()
+    return None
+
+
 @lru_cache(maxsize=1)
 def environment() -> dict:
     """A JSON-able description of this process's machine and installation."""
@@ -76,6 +129,9 @@ def environment() -> dict:
         "cpu": _llvm_cpu(),
         "cpu_model": _cpu_model(),
         "numpy_simd": _numpy_simd(),
+        "blas_core": _blas_core(),
+        "mesa": _mesa(),
+        "overrides": {k: v for k, v in sorted(os.environ.items()) if k.startswith(OVERRIDE_PREFIXES)},
     }
 
 
@@ -90,7 +146,7 @@ def fingerprint(env: dict | None) -> tuple | None:
 def differences(a: dict, b: dict) -> list[str]:
     """The fingerprint entries in which two environments differ, as 'what: A against B'."""
     out = []
-    for key in ("python", "cpu", "numpy_simd", "renderer"):
+    for key in ("python", "cpu", "numpy_simd", "blas_core", "mesa", "overrides", "renderer"):
         if a.get(key) != b.get(key):
             out.append(f"{key} {a.get(key)} against {b.get(key)}")
     pa, pb = a.get("packages") or {}, b.get("packages") or {}

@@ -267,8 +267,10 @@ def _environments(summaries: list[dict]) -> list[dict]:
 
 def _describe(env: dict) -> str:
     pk = ", ".join(f"{k} {v}" for k, v in (env.get("packages") or {}).items() if v)
+    over = ", ".join(f"{k}={v}" for k, v in (env.get("overrides") or {}).items())
     return (f"Python {env.get('python')}, {pk}; processor {env.get('cpu_model')} (compiled for {env.get('cpu')}, "
-            f"NumPy SIMD {'/'.join(env.get('numpy_simd') or []) or 'baseline'}); renderer {env.get('renderer')}")
+            f"NumPy SIMD {'/'.join(env.get('numpy_simd') or []) or 'baseline'}, OpenBLAS {env.get('blas_core')}); renderer {env.get('renderer')}"
+            + (f" (Mesa {env['mesa']})" if env.get("mesa") else "") + (f"; set: {over}" if over else ""))
 
 
 def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:

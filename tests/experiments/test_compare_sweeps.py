@@ -130,3 +130,24 @@ def test_the_cli_gate_fails_only_a_significant_regression(tmp_path, capsys):
     assert main(["compare", str(good), str(tmp_path / "nowhere")]) == 2
     err = capsys.readouterr().err
     assert "--fail-if-worse" in err and "nowhere" in err and "Traceback" not in err
+
+
+def test_the_environment_record_names_versions_processor_and_overrides(monkeypatch):
+    """What an episode records of its environment: the packages' versions as installed, the processor
+    numba compiles for, and the variables set by hand that change how the libraries compute."""
+    import numpy as np
+
+    from experiments.environment import differences, environment, fingerprint
+
+    environment.cache_clear()
+    monkeypatch.setenv("GALLIUM_NOSSE", "1")
+    try:
+        env = environment()
+    finally:
+        environment.cache_clear()
+    assert env["packages"]["numpy"] == np.__version__ and env["cpu"]
+    assert env["overrides"]["GALLIUM_NOSSE"] == "1"
+    plain = {**env, "overrides": {k: v for k, v in env["overrides"].items() if k != "GALLIUM_NOSSE"}}
+    assert fingerprint(plain) != fingerprint(env)
+    assert differences(plain, env) == [f"overrides {plain['overrides']} against {env['overrides']}"]
+    json.dumps(env)  # it goes into summary.json
