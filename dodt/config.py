@@ -248,6 +248,15 @@ class LearnedConfig:
     # (ours; the ref uses the latest box alone)
     person_window: int = 3
     person_min: int = 2
+    # a person track beyond the ensemble's depth range (depth.depth_max from the camera), where the
+    # learned boxes are its only detections, coasts at most this long (ours; 0: as any track, for
+    # track.coast_time). Such a track's velocity comes from boxes lifted from noisy far depth, and
+    # coasting on it drifts off its person: with the full coast time, 78 % of dodt+yolo's false
+    # dynamic reports on the benchmark's seed 0 were coasting person tracks, 90 % of them 5-10 m
+    # away. Perception benchmark, seeds 0-2 (FP % / ID switches / recall beyond 4 m %): 1 s (as
+    # before) 8.7 / 151 / 92.6; 0.4 s 6.0 / 146 / 89.5; 0.2 s 5.0 / 160 / 87.8; errors within 5 m
+    # and recall at 0.5-5 m the same for all three
+    far_coast_time: float = 0.4  # s
 
 
 @dataclass(frozen=True)

@@ -174,7 +174,7 @@ class DODT:
             self.tracker.predict(dt)
         pairs = self.tracker.associate(dets, T[:3, 3])
         t1 = time.perf_counter()
-        self.tracker.correct(dets, pairs, seq, stamp)
+        self.tracker.correct(dets, pairs, seq, stamp, T[:3, 3])
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:

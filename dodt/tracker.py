@@ -282,7 +282,19 @@ class Tracker:
                 pairs += [(ut[a], ud[b]) for a, b in assign(cost, -np.inf)]
         return pairs
 
-    def correct(self, dets: list[Detection], pairs: list[tuple[int, int]], seq: int, stamp: float) -> None:
+    def _coast_time(self, tr: Track, camera: np.ndarray | None) -> float:
+        """How long ``tr`` may coast: a person track beyond the ensemble's depth range, seen by the
+        learned boxes alone, for learned.far_coast_time; any other for track.coast_time."""
+        far = self.cfg.learned.far_coast_time
+        if far > 0 and camera is not None and tr.is_person:
+            d = float(np.hypot(*(tr.center_xy - np.asarray(camera, float)[:2])))
+            if d > self.cfg.depth.depth_max:
+                return min(far, self.cfg.track.coast_time)
+        return self.cfg.track.coast_time
+
+    def correct(self, dets: list[Detection], pairs: list[tuple[int, int]], seq: int, stamp: float,
+                camera: np.ndarray | None = None) -> None:
+        """camera: the camera's position in the world (without it every track coasts for track.coast_time)."""
         matched_t = {t for t, _ in pairs}
         matched_d = {d for _, d in pairs}
         for ti, di in pairs:
@@ -290,7 +302,7 @@ class Tracker:
         survivors = []
         for i, tr in enumerate(self.tracks):
             if i not in matched_t:
-                if stamp - tr.last_seen > self.cfg.track.coast_time:
+                if stamp - tr.last_seen > self._coast_time(tr, camera):
                     continue  # lost for too long
                 if tr.is_person and float(np.linalg.norm(tr.kf.velocity)) > self.cfg.track.max_coast_speed:
                     continue  # a person faster than people walk: a velocity made of noise

@@ -421,3 +421,39 @@ def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
         feed(k / FPS, [])
         feed.tracker.drop_seen_through(depth, K, T)
     assert (feed.tracker.tracks == []) == dropped
+
+
+@pytest.mark.parametrize("x, person, coasts", [
+    (7.0, True, 0.4),   # a person beyond the depth range (5.5 m): its learned boxes were its only detections
+    (3.0, True, 1.0),   # within it the ensemble sees him too: the usual coast time
+    (7.0, False, 1.0),  # not a person track: as before
+])
+def test_a_far_person_track_coasts_briefly(x, person, coasts):
+    """A person track farther than depth.depth_max from the camera coasts learned.far_coast_time
+    (0.4 s) after its last box; others coast track.coast_time (1 s)."""
+    cfg = DODTConfig()
+    assert cfg.learned.far_coast_time == 0.4 and cfg.depth.depth_max == 5.5 and cfg.track.coast_time == 1.0
+    tracker = Tracker(cfg)
+    for k in range(4):
+        d = det([x, 0.0, 0.9])
+        d.is_person = person
+        tracker.correct([d], tracker.associate([d], CAMERA), k, k / FPS, CAMERA)
+    assert len(tracker.tracks) == 1 and tracker.tracks[0].is_person == person
+    last_seen = 3 / FPS
+    alive, k = [], 4
+    while k / FPS - last_seen < 1.5:
+        tracker.predict(1 / FPS)
+        tracker.correct([], [], k, k / FPS, CAMERA)
+        alive.append((k / FPS - last_seen, bool(tracker.tracks)))
+        k += 1
+    lived = max(t for t, a in alive if a)
+    assert coasts - 1 / FPS < lived <= coasts + 1e-9
+    # without the camera's position the far rule cannot apply: every track coasts the full time
+    if person and x > 5.5:
+        t2 = Tracker(cfg)
+        for k in range(4):
+            d = det([x, 0.0, 0.9])
+            d.is_person = True
+            t2.correct([d], t2.associate([d], CAMERA), k, k / FPS)
+        t2.correct([], [], 4, 3 / FPS + 0.5)
+        assert len(t2.tracks) == 1
