@@ -265,7 +265,8 @@ def _environments(summaries: list[dict]) -> list[dict]:
     return list(out.values())
 
 
-def _describe(env: dict) -> str:
+def describe_environment(env: dict) -> str:
+    """One line naming an episode's environment (experiments.environment) for a report."""
     pk = ", ".join(f"{k} {v}" for k, v in (env.get("packages") or {}).items() if v)
     over = ", ".join(f"{k}={v}" for k, v in (env.get("overrides") or {}).items())
     return (f"Python {env.get('python')}, {pk}; processor {env.get('cpu_model')} (compiled for {env.get('cpu')}, "
@@ -310,7 +311,7 @@ def markdown(agg: dict) -> str:
     envs = agg.get("environments", [])
     if envs:
         L += [("Environment: " if len(envs) == 1 else f"Environments ({len(envs)}, outcomes may differ between them): ")
-              + "; ".join(_describe(e) for e in envs), ""]
+              + "; ".join(describe_environment(e) for e in envs), ""]
     L += ["| seed | outcome | collisions | time to goal [s] | min clearance [m] |", "|---|---|---|---|---|"]
     for s in agg["per_seed"]:
         outcome = "success" if s["success"] else (s["failure_reason"] or "failure")

@@ -28,7 +28,8 @@ def test_reproduce_writes_a_report_with_every_part(tmp_path):
                 runtime_seconds=1.0, nav_seeds={"oracle": 2, "static-only": 1})
     report = reproduce(tmp_path / "rep", jobs=1, plan=plan, scenario=str(scn))
     text = report.read_text()
-    for part in ("Table I", "Table II", "| oracle | 2 |", "| static-only | 1 |", "What differs"):
+    for part in ("Table I", "Table II", "| oracle | 2 |", "| static-only | 1 |", "What differs", "Environment (",
+                 "compiled for"):
         assert part in text, part
     # Every figure the report embeds exists.
     import re
