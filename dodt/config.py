@@ -139,6 +139,9 @@ class KalmanConfig:
     # scenarios, seeds 0-2: velocity error 0.153 -> 0.138 m/s (circles 0.194 -> 0.155; the
     # straight walkers unchanged); without the sustained-turn test, 0.141 with the corridor's
     # random walkers worse (0.231 -> 0.268)
+    # ours: velocity pseudo-measurements difference a learned box's anchor against the oldest learned
+    # one in the window, and a cluster's against a cluster's, where the window holds one
+    same_kind_differences: bool = True
     turn_window: float = 1.0  # s
     turn_min_speed: float = 0.3  # m/s; slower, the heading says little
     q_white: float = 4.0  # (m/s^3)^2 s for CA, (m/s^2)^2 s for CV, with measurement = "position"

@@ -31,6 +31,7 @@ class _Observation:
     stamp: float
     center: np.ndarray
     velocity: np.ndarray | None  # pseudo-measured velocity at this observation (None: the first one)
+    lifted: bool = False  # measured on a learned box alone (its points: depths lifted from the box)
 
 
 def _anchor(det: Detection, source: str) -> np.ndarray:
@@ -56,7 +57,7 @@ class Track:
         self.det_size = det.size.copy()  # the latest detection's, for association
         self.count, self.spread = features(det)
         self.observations: deque[_Observation] = deque(maxlen=cfg.kalman.averaging_frames + 1)
-        self.observations.append(_Observation(seq, stamp, anchor.copy(), None))
+        self.observations.append(_Observation(seq, stamp, anchor.copy(), None, det.source == "learned"))
         self.clouds: deque[tuple[int, float, np.ndarray]] = deque(maxlen=cfg.identification.frame_skip + 1)
         self.clouds.append((seq, stamp, det.points))
         self.history: deque[tuple[float, float, float, float]] = deque(maxlen=cfg.track.history)
@@ -126,6 +127,13 @@ class Track:
         k = self.cfg.kalman
         obs = list(self.observations)
         first = max(0, len(obs) - k.averaging_frames)  # up to averaging_frames back
+        # The difference is taken to an observation of the same kind where the window holds one: a
+        # learned box's anchor (depths lifted from the box) sits apart from the same person's cluster
+        # of points, and a track switching between them would read that offset as motion
+        lifted = det.source == "learned"
+        same = [i for i in range(first, len(obs)) if obs[i].lifted == lifted]
+        if same and k.same_kind_differences:
+            first = same[0]
         prev = obs[first]
         dt = stamp - prev.stamp
         anchor = _anchor(det, k.position_source)
@@ -140,7 +148,7 @@ class Track:
         a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
         window = (len(obs) - first) / k.averaging_frames  # frames spanned / full window
         self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window)
-        self.observations.append(_Observation(seq, stamp, anchor.copy(), v))
+        self.observations.append(_Observation(seq, stamp, anchor.copy(), v, lifted))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
         # which then cannot follow a person whose box changes as they turn or swing their arms).
