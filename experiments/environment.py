@@ -39,7 +39,9 @@ FINGERPRINT_KEYS = ("python", "packages", "cpu", "numpy_simd", "blas_core", "mes
 
 # environment variables that change how the libraries compute (set by hand, for tests like the above)
 OVERRIDE_PREFIXES = ("GALLIUM_", "GALLIVM_", "LP_", "NUMBA_CPU_", "NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES",
-                     "OPENBLAS_", "OPENCV_CPU_DISABLE", "OMP_NUM_THREADS")
+                     "OPENBLAS_", "OPENCV_CPU_DISABLE")
+# (thread counts are left out: a Dask worker sets OPENBLAS_NUM_THREADS=1 and its episodes are the
+# same bit for bit as local ones, tests/experiments/test_sweep.py)
 
 
 def _version(name: str) -> str | None:
@@ -131,7 +133,8 @@ def environment() -> dict:
         "numpy_simd": _numpy_simd(),
         "blas_core": _blas_core(),
         "mesa": _mesa(),
-        "overrides": {k: v for k, v in sorted(os.environ.items()) if k.startswith(OVERRIDE_PREFIXES)},
+        "overrides": {k: v for k, v in sorted(os.environ.items())
+                      if k.startswith(OVERRIDE_PREFIXES) and not k.endswith("_NUM_THREADS")},
     }
 
 
