@@ -131,9 +131,8 @@ class Track:
         # learned box's anchor (depths lifted from the box) sits apart from the same person's cluster
         # of points, and a track switching between them would read that offset as motion
         lifted = det.source == "learned"
-        same = [i for i in range(first, len(obs)) if obs[i].lifted == lifted]
-        if same and k.same_kind_differences:
-            first = same[0]
+        if k.same_kind_differences:
+            first = next((i for i in range(first, len(obs)) if obs[i].lifted == lifted), first)
         prev = obs[first]
         dt = stamp - prev.stamp
         anchor = _anchor(det, k.position_source)

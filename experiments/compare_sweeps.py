@@ -16,7 +16,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from experiments.environment import differences, fingerprint
+from experiments.environment import differences, distinct
 from experiments.sweep import RESULTS, read_results
 
 
@@ -85,11 +85,11 @@ def _environment_warnings(a: dict[int, dict], b: dict[int, dict], common: list[i
     out = []
     envs = {}
     for name, rows in (("baseline", a), ("change", b)):
-        prints = {fingerprint(rows[s].get("environment")): rows[s].get("environment") for s in common}
-        if None in prints:
+        recorded = [rows[s].get("environment") for s in common]
+        if not all(recorded):
             out.append(f"some episodes of the {name} record no environment (run before episodes recorded it): "
                        f"whether both sweeps ran on the same machine and installation is unknown")
-        known = [e for f, e in prints.items() if f is not None]
+        known = distinct(recorded)
         if len(known) > 1:
             out.append(f"the {name}'s episodes ran in {len(known)} environments ({'; '.join(differences(*known[:2]))})")
         envs[name] = known[0] if known else None

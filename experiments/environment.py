@@ -146,11 +146,21 @@ def fingerprint(env: dict | None) -> tuple | None:
     return tuple((k, repr(env.get(k))) for k in FINGERPRINT_KEYS)
 
 
+def distinct(envs) -> list[dict]:
+    """The environments of ``envs`` (dicts, or None for unrecorded ones: left out) with different
+    fingerprints, first seen first."""
+    out = {}
+    for env in envs:
+        if env:
+            out.setdefault(fingerprint(env), env)
+    return list(out.values())
+
+
 def differences(a: dict, b: dict) -> list[str]:
     """The fingerprint entries in which two environments differ, as 'what: A against B'."""
     out = []
-    for key in ("python", "cpu", "numpy_simd", "blas_core", "mesa", "overrides", "renderer"):
-        if a.get(key) != b.get(key):
+    for key in FINGERPRINT_KEYS:
+        if key != "packages" and a.get(key) != b.get(key):
             out.append(f"{key} {a.get(key)} against {b.get(key)}")
     pa, pb = a.get("packages") or {}, b.get("packages") or {}
     for name in sorted(set(pa) | set(pb)):
@@ -159,4 +169,4 @@ def differences(a: dict, b: dict) -> list[str]:
     return out
 
 
-__all__ = ["PACKAGES", "differences", "environment", "fingerprint"]
+__all__ = ["PACKAGES", "differences", "distinct", "environment", "fingerprint"]

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from experiments import bench_perception, sweep
-from experiments.environment import fingerprint
+from experiments.environment import distinct
 from experiments.plots import plot_runtime_table, plot_sweep
 
 
@@ -112,10 +112,10 @@ def reproduce(out: Path, quick: bool = False, jobs: int = 2, plan: Plan | None =
           "| perception | episodes | success | collision | timeout | median time to goal [s] | median mean speed [m/s] |",
           "|---|---|---|---|---|---|---|"]
     L += [_md_rates(a) for a in nav.values()]
-    envs = {fingerprint(e): e for a in nav.values() for e in a.get("environments", [])}
+    envs = distinct(e for a in nav.values() for e in a.get("environments", []))
     if envs:
         L += ["", "Environment (outcomes agree bit for bit only within one; compare sweeps run in the same): "
-              + "; ".join(sweep.describe_environment(e) for e in envs.values())]
+              + "; ".join(sweep.describe_environment(e) for e in envs)]
     for mode in nav:
         L += ["", f"### {mode}", "", f"![outcomes](nav_{mode}/sweep_outcomes.png)",
               f"![min clearance](nav_{mode}/sweep_min_clearance.png)", "",

@@ -24,7 +24,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from experiments.environment import fingerprint
+from experiments.environment import distinct
 from experiments.episode import EpisodeConfig, run_episode
 
 RESULTS = "results.jsonl"
@@ -255,22 +255,13 @@ def _dist(values) -> dict:
             "p75": round(float(q[3]), 3), "p95": round(float(q[4]), 3), "max": round(float(a.max()), 3)}
 
 
-def _environments(summaries: list[dict]) -> list[dict]:
-    """The distinct environments the episodes ran in (one, unless a sweep was resumed elsewhere)."""
-    out = {}
-    for s in summaries:
-        env = s.get("environment")
-        if env:
-            out.setdefault(fingerprint(env), env)
-    return list(out.values())
-
-
 def describe_environment(env: dict) -> str:
     """One line naming an episode's environment (experiments.environment) for a report."""
     pk = ", ".join(f"{k} {v}" for k, v in (env.get("packages") or {}).items() if v)
     over = ", ".join(f"{k}={v}" for k, v in (env.get("overrides") or {}).items())
+    simd = "/".join(env.get("numpy_simd") or []) or "baseline"
     return (f"Python {env.get('python')}, {pk}; processor {env.get('cpu_model')} (compiled for {env.get('cpu')}, "
-            f"NumPy SIMD {'/'.join(env.get('numpy_simd') or []) or 'baseline'}, OpenBLAS {env.get('blas_core')}); renderer {env.get('renderer')}"
+            f"NumPy SIMD {simd}, OpenBLAS {env.get('blas_core')}); renderer {env.get('renderer')}"
             + (f" (Mesa {env['mesa']})" if env.get("mesa") else "") + (f"; set: {over}" if over else ""))
 
 
@@ -287,7 +278,8 @@ def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
         "min_clearance_person": _dist(s["min_clearance"]["person"] for s in summaries),
         "min_clearance_overall": _dist(s["min_clearance"]["overall"] for s in summaries),
         "planner_fallbacks": int(sum(s["planner_stats"]["fallbacks"] for s in summaries)),
-        "environments": _environments(summaries),
+        # the environments the episodes ran in (one, unless a sweep was resumed elsewhere)
+        "environments": distinct(s.get("environment") for s in summaries),
         "per_seed": [{"seed": s["seed"], "success": s["success"], "collided": s["collided"],
                       "collisions": s["collision_count"], "timeout": s["timeout"],
                       "failure_reason": s["failure_reason"], "time_to_goal": s["time_to_goal"],
