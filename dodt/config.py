@@ -225,6 +225,10 @@ class LearnedConfig:
     score_threshold: float | None = None  # None -> the value recorded with the model
     nms_iou: float = 0.45  # ref
     threads: int = 1  # onnxruntime intra-op threads
+    # views of the image the network runs on, fused (dodt.learned.views; ours): ("full",) is the
+    # plain detector; ("full", "flip", "center") also runs the mirrored image and an enlarged
+    # central crop, at three times the inference time
+    views: tuple[str, ...] = ("full",)
     mad_n: float = 1.5  # depths within median +- n MAD belong to the object, ref (the paper leaves n open)
     margin_px: int = 2  # px cut from each side of the 2D box before reading depths (ours)
     # the box's central part read for the depth (fractions of its width and height; ours): the torso

@@ -70,7 +70,13 @@ class PersonDetector2D:
     """People in a color image: boxes (K, 4) as (x1, y1, x2, y2) pixels of that image, and scores."""
 
     def __init__(self, model_path: str | Path | None = None, score_threshold: float | None = None,
-                 nms_iou: float = 0.45, threads: int = 1):
+                 nms_iou: float = 0.45, threads: int = 1, views=("full",)):
+        from dodt.learned.views import parse_views
+
+        try:
+            self.views = parse_views(views)
+        except ValueError as e:
+            raise ModelError(f"learned detector: {e}") from None
         self.model_path = Path(model_path) if model_path else SHIPPED_MODEL
         self.record = load_record(self.model_path)
         self.session = open_session(self.model_path, threads)
@@ -91,8 +97,13 @@ class PersonDetector2D:
         x = layout.to_tensor(layout.resize_for_network(color))
         return self.session.run(None, {self._input: x})[0][0]
 
+    def _run(self, x: np.ndarray) -> np.ndarray:
+        return self.session.run(None, {self._input: layout.to_tensor(x)})[0][0]
+
     def __call__(self, color: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        boxes, scores = layout.decode(self.raw(color), self.score_threshold)
-        keep = layout.nms(boxes, scores, self.nms_iou)
+        from dodt.learned.views import detect
+
+        boxes, scores = detect(self._run, color, self.views, self.score_threshold, self.nms_iou,
+                               floor=self.score_threshold)
         h, w = color.shape[:2]
-        return boxes[keep] * np.array([w, h, w, h], np.float32), scores[keep]
+        return boxes * np.array([w, h, w, h], np.float32), scores

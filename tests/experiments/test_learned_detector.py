@@ -50,6 +50,25 @@ def test_shipped_model_is_small_recorded_and_checked():
     assert 0.0 < rec["score_threshold"] < 1.0
 
 
+def test_several_views_find_the_people_and_bad_view_names_are_refused(rendered):
+    det = PersonDetector2D(views=("full", "flip", "center"))
+    found = 0
+    for frame, truth in rendered:
+        boxes, scores = det(frame.color)
+        assert np.all(scores >= det.score_threshold)
+        people = [o for o in truth.obstacles if o.kind == "person"]
+        for o in people:
+            mask = truth.segmentation == o.id
+            if np.count_nonzero(mask) < 2000:
+                continue
+            r, c = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+            gt = (c[0], r[0], c[-1] + 1, r[-1] + 1)
+            found += any(_iou(b, gt) > 0.5 for b in boxes)
+    assert found >= 3
+    with pytest.raises(ModelError, match="unknown 'side'"):
+        PersonDetector2D(views=("full", "side"))
+
+
 def test_run_time_never_imports_pytorch():
     code = ("import sys, numpy as np; from dodt.pipeline import DODT; from dodt.presets import preset; "
             "from dodt.frames import CameraIntrinsics, SensorFrame; K = CameraIntrinsics(); "
