@@ -290,13 +290,45 @@ def _cmd_train_detector(args) -> int:
         raise UserError("--threads: must be >= 1")
     from experiments.detector.train import train
 
+    if args.batch_size < 2:
+        raise UserError("--batch-size: must be >= 2 (BatchNorm)")
+    if not args.lr > 0:
+        raise UserError("--lr: must be > 0")
+    if args.eval_every < 0:
+        raise UserError("--eval-every: must be >= 0")
+    if args.warmup_epochs < 0:
+        raise UserError("--warmup-epochs: must be >= 0")
     data = _detector_data(args)
     command = (f"dodt-nav train-detector --data {args.data} --train-seeds {args.train_seeds} --val-seeds "
                f"{args.val_seeds} --images-per-seed {args.images_per_seed} --epochs {args.epochs} --seed {args.seed} "
                f"--threads {args.threads}")
-    record = train(data, Path(args.out), epochs=args.epochs, seed=args.seed, threads=args.threads, command=command)
+    for flag, value, default in (("--device", args.device, "cpu"), ("--arch", args.arch, "base"),
+                                 ("--batch-size", args.batch_size, 32), ("--lr", args.lr, 3e-3),
+                                 ("--warmup-epochs", args.warmup_epochs, 1.0)):
+        if value != default:
+            command += f" {flag} {value}"
+    try:
+        record = train(data, Path(args.out), epochs=args.epochs, seed=args.seed, threads=args.threads,
+                       command=command, device=args.device, arch=args.arch, batch_size=args.batch_size,
+                       lr=args.lr, eval_every=args.eval_every, warmup_epochs=args.warmup_epochs)
+    except ValueError as e:
+        raise UserError(str(e)) from None
     print(f"wrote {args.out}/person_detector.onnx and person_detector.json; validation: "
           + json.dumps(record.get("validation", {}))[:400])
+    return 0
+
+
+def _cmd_pack_detector_data(args) -> int:
+    from experiments.detector.packed import pack
+
+    missing = [f for f in args.files if not Path(f).is_file()]
+    if missing:
+        raise UserError(f"{missing[0]}: no such dataset file")
+    try:
+        out = pack(args.files, args.out, quality=args.quality)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    print(f"wrote {out} ({out.stat().st_size / 2**20:.1f} MiB)")
     return 0
 
 
@@ -307,8 +339,14 @@ def _cmd_eval_detector(args) -> int:
     model = Path(args.model) if args.model else SHIPPED_MODEL
     load_record(model)  # a missing or corrupt model stops here with its name
     data = _detector_data(args, splits=("val",))  # evaluation needs no training images
+    from dodt.learned.views import parse_views
+
+    try:
+        views = parse_views(args.views)
+    except ValueError as e:
+        raise UserError(f"--views: {e}") from None
     r = average_precision(model, data / "val.npz", max_distance=args.max_distance, nms_iou=args.nms_iou,
-                          min_visible_px=args.min_visible_px)
+                          min_visible_px=args.min_visible_px, views=views)
     keys = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()
                      if not isinstance(v, dict))
     print(f"{model.name} on {data / 'val.npz'}: {keys}")
@@ -453,6 +491,12 @@ def build_parser() -> argparse.ArgumentParser:
             d.add_argument("--epochs", type=int, default=60)
             d.add_argument("--seed", type=int, default=0, help="training seed (weights, data order, augmentation)")
             d.add_argument("--threads", type=int, default=2, help="PyTorch threads (the result depends on it)")
+            d.add_argument("--device", default="cpu", help="cpu, or a CUDA device (cuda, cuda:1)")
+            d.add_argument("--arch", default="base", help="network size: base (shipped shape) or wide")
+            d.add_argument("--batch-size", type=int, default=32)
+            d.add_argument("--lr", type=float, default=3e-3, help="AdamW's peak learning rate")
+            d.add_argument("--warmup-epochs", type=float, default=1.0, help="linear warm-up before the cosine decay")
+            d.add_argument("--eval-every", type=int, default=5, help="validate every N epochs (0: at the end only)")
             d.add_argument("--out", default="runs/detector", help="folder for person_detector.onnx and .json")
         else:
             d.add_argument("--model", default=None, help="an ONNX model with its .json (default: the shipped one)")
@@ -460,7 +504,16 @@ def build_parser() -> argparse.ArgumentParser:
             d.add_argument("--nms-iou", type=float, default=0.45, help="non-maximum suppression IoU (FastestDet's 0.45)")
             d.add_argument("--min-visible-px", type=int, default=0,
                            help="ignore people showing fewer pixels at 640x480 (the perception metrics use 400)")
+            d.add_argument("--views", default="full",
+                           help="views fused at run time, a comma list of full, flip, center, center-flip")
         d.set_defaults(func=func)
+
+    pk = sub.add_parser("pack-detector-data", help="a person dataset file (or shards of one split) with its "
+                        "images as WebP, some 60 times smaller, for copying to a training machine")
+    pk.add_argument("files", nargs="+", help="train.npz / val.npz files of one split, as rendered")
+    pk.add_argument("--out", required=True, help="the packed file to write")
+    pk.add_argument("--quality", type=int, default=90, help="WebP quality 1-100, or 101 for lossless")
+    pk.set_defaults(func=_cmd_pack_detector_data)
 
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dodt.learned import layout
+from dodt.learned import layout, views as view_fusion
 from dodt.learned.model import open_session
 
 NMS_IOU = 0.45
@@ -158,9 +158,14 @@ def summarize(matches: list[ImageMatch], gt_distances: list[np.ndarray], gt_igno
 
 def load_split(npz_path) -> dict:
     """images (N, H, W, 3) uint8, per-image box arrays (K, 6): x1, y1, x2, y2, distance, visible
-    pixels, and the meta dictionary, from a dataset file."""
+    pixels, and the meta dictionary, from a dataset file, as generated or packed."""
     with np.load(Path(npz_path)) as z:
-        images = z["images"]
+        if "webp" in z:  # experiments.detector.packed
+            from experiments.detector.packed import unpack_images
+
+            images = unpack_images(z["webp"], z["offsets"], str(npz_path))
+        else:
+            images = z["images"]
         boxes = z["boxes"].astype(np.float64)
         meta = json.loads(str(z["meta"])) if "meta" in z else {}
     idx = boxes[:, 0].astype(np.int64) if len(boxes) else np.zeros(0, np.int64)
@@ -236,6 +241,17 @@ def run_onnx(session, images: np.ndarray) -> np.ndarray:
     return out
 
 
+def detect_all(session, images: np.ndarray, views, score_threshold: float,
+               nms_iou: float = NMS_IOU) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The run time's detections (`dodt.learned.views.detect`) of each image through ``views``."""
+    name = session.get_inputs()[0].name
+
+    def run(x: np.ndarray) -> np.ndarray:
+        return session.run(["preds"], {name: layout.to_tensor(x)})[0][0]
+
+    return [view_fusion.detect(run, img, views, score_threshold, nms_iou, floor=score_threshold) for img in images]
+
+
 def recommended_threshold(model_path) -> float | None:
     meta = Path(model_path).with_suffix(".json")
     if meta.is_file():
@@ -246,14 +262,17 @@ def recommended_threshold(model_path) -> float | None:
 
 def average_precision(model_path, npz_path, max_distance: float = 10.0, iou: float = 0.5,
                       score_threshold: float = 0.05, operating_threshold: float | None = None,
-                      threads: int = 2, nms_iou: float = NMS_IOU, min_visible_px: int = 0) -> dict:
+                      threads: int = 2, nms_iou: float = NMS_IOU, min_visible_px: int = 0,
+                      views=("full",)) -> dict:
     """AP@``iou`` (VOC all-point) of the ONNX model on a dataset file, for the people within
     ``max_distance``; detections below ``score_threshold`` are dropped before NMS (IoU ``nms_iou``,
     FastestDet's 0.45 by default).
 
     Precision, recall and recall per distance bin (0-2, 2-4, 4-6, 6-8, 8-10 m) are given at
     ``operating_threshold``: by default the one recommended in the model's json (its
-    ``score_threshold``), else 0.3. Returns a dict: ap50, precision, recall,
+    ``score_threshold``), else 0.3. ``views`` (names or `dodt.learned.views.View`s) runs the
+    model on several views of each image and fuses them as at run time; the boxes of each view
+    from ``score_threshold`` up are fused, and ``nms_iou`` is the fusion's IoU too. Returns a dict: ap50, precision, recall,
     recall_by_distance {bin: {boxes, recall}}, images, boxes (counted), boxes_ignored,
     operating_threshold, best_f1_threshold, max_distance, iou, score_threshold, nms_iou.
     """
@@ -265,10 +284,15 @@ def average_precision(model_path, npz_path, max_distance: float = 10.0, iou: flo
         operating_threshold = recommended_threshold(model_path)
         if operating_threshold is None:
             operating_threshold = DEFAULT_OPERATING_THRESHOLD
+    view_list = tuple(v if isinstance(v, view_fusion.View) else view_fusion.parse_views([v])[0] for v in views)
     data = load_split(npz_path)
-    preds = run_onnx(onnx_session(model_path, threads), data["images"])
-    out = evaluate_detections(decode_all(preds, score_threshold, nms_iou), data["boxes"], max_distance, iou,
-                              operating_threshold, min_visible_px)
+    session = onnx_session(model_path, threads)
+    if view_list == (view_fusion.VIEWS["full"],):
+        detections = decode_all(run_onnx(session, data["images"]), score_threshold, nms_iou)
+    else:
+        detections = detect_all(session, data["images"], view_list, score_threshold, nms_iou)
+    out = evaluate_detections(detections, data["boxes"], max_distance, iou, operating_threshold, min_visible_px)
     out["score_threshold"] = float(score_threshold)
     out["nms_iou"] = float(nms_iou)
+    out["views"] = [name for v in view_list for name, known in view_fusion.VIEWS.items() if known == v]
     return out

@@ -21,6 +21,12 @@ import torch.nn.functional as F
 STAGE_REPEATS = (2, 6, 2)
 STAGE_CHANNELS = (24, 48, 96, 192)  # stem, stride 8, stride 16, stride 32 (FastestDet's)
 NECK_CHANNELS = 96
+# Named sizes of the same network: "base" is the shape above (180,629 parameters); "wide" has
+# more channels and one more unit per stage, for training where compute is cheap (a GPU).
+ARCHS = {
+    "base": {"repeats": STAGE_REPEATS, "channels": STAGE_CHANNELS, "neck": NECK_CHANNELS},
+    "wide": {"repeats": (3, 7, 3), "channels": (32, 64, 128, 256), "neck": 128},
+}
 
 
 def conv_bn(c_in: int, c_out: int, k: int = 1, stride: int = 1, groups: int = 1, relu: bool = True) -> nn.Sequential:
@@ -152,8 +158,20 @@ class PersonDetector(nn.Module):
         return self.head(self.spp(torch.cat([p1, p2, p3], dim=1)))
 
 
-def build_model() -> PersonDetector:
-    return PersonDetector()
+def build_model(arch: str = "base") -> PersonDetector:
+    """The network of one of the named sizes in ARCHS."""
+    if arch not in ARCHS:
+        raise ValueError(f"arch: unknown {arch!r}; expected one of {', '.join(ARCHS)}")
+    a = ARCHS[arch]
+    return PersonDetector(a["repeats"], a["channels"], a["neck"])
+
+
+def describe(arch: str = "base") -> str:
+    """The architecture in words, for the model's record."""
+    a = ARCHS[arch]
+    return ("FastestDet-style: ShuffleNetV2-like backbone (repeats %s, channels %s), avg-pooled stride-8 + "
+            "upsampled stride-32 + stride-16 concat, light SPP (5x5 depthwise stacks 1/2/3, residual, %d "
+            "channels), one anchor-free stride-16 head" % (list(a["repeats"]), list(a["channels"]), a["neck"]))
 
 
 def count_parameters(model: nn.Module) -> int:

@@ -13,15 +13,14 @@ cross-entropy with an IoU-aware target on the positives (0.5 + 0.5 IoU of the ce
 box, detached, so the score ranks well-placed boxes first, which NMS keeps) and 0 elsewhere,
 both normalised by the number of positives. Total = objectness + REG_WEIGHT * regression.
 
-Augmentation (our renderer has little lighting variety): random scale (0.7-1.4) and translate
-(up to 20 % of the image) with the border filled by the image's mean colour, boxes clipped and
-dropped when less than KEEP_FRACTION of their area stays in view (the rest of those are ignored
-by the objectness loss); horizontal flip; photometric jitter (gain per channel, brightness,
-contrast, saturation, gamma, Gaussian noise, Gaussian blur).
+Augmentation: `experiments.detector.augment`, a batch at a time on the training device.
 
 AdamW, linear warm-up then cosine decay; an exponential moving average of the weights is what
 is evaluated and exported. Everything follows from the seed (torch.manual_seed, one numpy
-Generator for data order and augmentation, deterministic algorithms, a fixed thread count).
+Generator for data order and augmentation, deterministic algorithms, a fixed thread count): on
+the CPU the same arguments give bit-identical weights. On a CUDA device the training images stay
+on the device and the batches are augmented there; the run is reproducible on that device and
+software up to the few CUDA kernels without a deterministic version (torch warns of those).
 """
 from __future__ import annotations
 
@@ -37,10 +36,10 @@ import numpy as np
 from dodt.learned import layout
 from dodt.learned.model import sha256_of
 from experiments.detector import evaluate
+from experiments.detector.augment import KEEP_FRACTION, augment, apply as augment_images, draw, move_boxes  # noqa: F401
 
 MODEL_NAME = "person_detector"
 MAX_OFFSET = 0.85  # grid cells: the largest centre offset a positive cell must reach
-KEEP_FRACTION = 0.45  # of a box's area left in view after a crop, to keep it as a target
 REG_WEIGHT = 2.0
 IOU_TARGET_FLOOR = 0.5  # objectness target of a positive = floor + (1 - floor) * IoU
 NMS_IOU = evaluate.NMS_IOU
@@ -58,59 +57,6 @@ def load_data(path) -> dict:
         raise ValueError(f"{path}: images must be (N, {layout.INPUT_H}, {layout.INPUT_W}, 3), "
                          f"got {data['images'].shape}")
     return data
-
-
-def augment(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One augmented image: (H, W, 3) float32 in [0, 1], kept boxes (K, 4) and ignored boxes (J, 4)
-    as fractions (x1, y1, x2, y2)."""
-    import cv2
-
-    H, W = img.shape[:2]
-    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
-    ignored = np.zeros((0, 4))
-    if rng.random() < 0.6:
-        s = math.exp(rng.uniform(math.log(0.7), math.log(1.4)))
-        dx, dy = rng.uniform(-0.2, 0.2, 2)
-        # x' = s (x - 0.5) + 0.5 + dx (fractions)
-        M = np.array([[s, 0.0, ((1 - s) * 0.5 + dx) * W], [0.0, s, ((1 - s) * 0.5 + dy) * H]])
-        fill = tuple(float(v) for v in img.reshape(-1, 3).mean(axis=0))
-        img = cv2.warpAffine(img, M, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                             borderValue=fill)
-        if len(boxes):
-            b = boxes.copy()
-            b[:, [0, 2]] = s * (b[:, [0, 2]] - 0.5) + 0.5 + dx
-            b[:, [1, 3]] = s * (b[:, [1, 3]] - 0.5) + 0.5 + dy
-            area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-            c = b.clip(0.0, 1.0)
-            frac = (c[:, 2] - c[:, 0]).clip(0) * (c[:, 3] - c[:, 1]).clip(0) / np.maximum(area, 1e-12)
-            big_enough = ((c[:, 3] - c[:, 1]) * H >= 3) & ((c[:, 2] - c[:, 0]) * W >= 2)
-            keep = (frac >= KEEP_FRACTION) & big_enough
-            ignored = c[(~keep) & (frac > 0)]
-            boxes = c[keep]
-    if rng.random() < 0.5:
-        img = img[:, ::-1]
-        boxes = np.stack([1 - boxes[:, 2], boxes[:, 1], 1 - boxes[:, 0], boxes[:, 3]], axis=1).reshape(-1, 4)
-        ignored = np.stack([1 - ignored[:, 2], ignored[:, 1], 1 - ignored[:, 0], ignored[:, 3]], axis=1).reshape(-1, 4)
-    x = np.ascontiguousarray(img, dtype=np.float32) * np.float32(1 / 255)
-    # Photometric jitter.
-    if rng.random() < 0.8:
-        gain = rng.uniform(0.85, 1.15, 3) * rng.uniform(0.6, 1.4)
-        x *= gain.astype(np.float32)
-    if rng.random() < 0.6:
-        m = np.float32(x.mean())
-        x = (x - m) * np.float32(rng.uniform(0.6, 1.4)) + m
-    if rng.random() < 0.5:
-        gray = x.mean(axis=2, keepdims=True)
-        x = gray + (x - gray) * np.float32(rng.uniform(0.3, 1.6))
-    np.clip(x, 0.0, 1.0, out=x)
-    if rng.random() < 0.5:
-        x = np.power(x, np.float32(math.exp(rng.uniform(math.log(0.6), math.log(1.6)))))
-    if rng.random() < 0.25:
-        x = cv2.GaussianBlur(x, (0, 0), float(rng.uniform(0.4, 1.3)))
-    if rng.random() < 0.4:
-        x = x + rng.standard_normal(x.shape, dtype=np.float32) * np.float32(rng.uniform(0.005, 0.04))
-    np.clip(x, 0.0, 1.0, out=x)
-    return x, boxes, ignored
 
 
 def build_targets(boxes_per_image: list[np.ndarray], ignored_per_image: list[np.ndarray]):
@@ -226,22 +172,25 @@ class EMA:
         d = self.decay * (1 - math.exp(-self.updates / self.ramp))
         with torch.no_grad():
             src = model.state_dict()
-            for k, v in self.model.state_dict().items():
-                if v.dtype.is_floating_point:
-                    v.mul_(d).add_(src[k].detach(), alpha=1 - d)
-                else:
+            mine = self.model.state_dict()
+            floats = [k for k, v in mine.items() if v.dtype.is_floating_point]
+            # one fused lerp over all float tensors: v += (1 - d) (src - v)
+            torch._foreach_lerp_([mine[k] for k in floats], [src[k].detach() for k in floats], 1.0 - d)
+            for k, v in mine.items():
+                if not v.dtype.is_floating_point:
                     v.copy_(src[k])
 
 
 def predict(model, images: np.ndarray, batch: int = 32) -> np.ndarray:
-    """Raw outputs of a torch model for uint8 images at the network size."""
+    """Raw outputs of a torch model (on its own device) for uint8 images at the network size."""
     torch = _torch()
     model.eval()
+    dev = next(model.parameters()).device
     outs = []
     with torch.no_grad():
         for i in range(0, len(images), batch):
-            x = torch.from_numpy(layout.to_tensor(images[i:i + batch])).contiguous(memory_format=torch.channels_last)
-            outs.append(model(x).float().numpy())
+            x = torch.from_numpy(layout.to_tensor(images[i:i + batch])).to(dev)
+            outs.append(model(x.contiguous(memory_format=torch.channels_last)).float().cpu().numpy())
     return np.concatenate(outs) if outs else np.zeros((0, layout.CHANNELS, layout.GRID_H, layout.GRID_W), np.float32)
 
 
@@ -253,7 +202,7 @@ def validate(model, data: dict, max_distance: float = 10.0) -> dict:
 def export_onnx(model, path: Path) -> None:
     """Fixed-shape ONNX (opset 17): input "images" (1, 3, H, W), output "preds" (1, 5, GH, GW)."""
     torch = _torch()
-    m = deepcopy(model).eval().to(memory_format=torch.contiguous_format)
+    m = deepcopy(model).cpu().eval().to(memory_format=torch.contiguous_format)
     x = torch.zeros(1, 3, layout.INPUT_H, layout.INPUT_W)
     path.parent.mkdir(parents=True, exist_ok=True)
     kwargs = dict(input_names=["images"], output_names=["preds"], opset_version=OPSET, do_constant_folding=True)
@@ -264,13 +213,13 @@ def export_onnx(model, path: Path) -> None:
 
 
 def check_onnx(model, path: Path, images: np.ndarray) -> float:
-    """Largest |onnxruntime - torch| over the given images (the size limit is checked too)."""
+    """Largest |onnxruntime - torch on the CPU| over the given images (the size limit is checked too)."""
     torch = _torch()
     size = path.stat().st_size
     if size > MAX_ONNX_BYTES:
         raise RuntimeError(f"{path}: {size} bytes, over the {MAX_ONNX_BYTES} limit")
     sess = evaluate.onnx_session(path, threads=torch.get_num_threads())
-    ref = predict(model, images)
+    ref = predict(deepcopy(model).cpu(), images)
     got = evaluate.run_onnx(sess, images)
     return float(np.max(np.abs(ref - got))) if len(images) else 0.0
 
@@ -286,36 +235,64 @@ def lr_at(step: int, total: int, base: float, warmup: int) -> float:
 
 
 def _meta_summary(meta: dict) -> dict:
-    keys = ("generator", "version", "split", "seeds", "images_per_seed", "counts", "renderers", "rules")
+    keys = ("generator", "version", "split", "seeds", "images_per_seed", "counts", "renderers", "rules", "packed")
     return {k: meta[k] for k in keys if k in meta}
 
 
 def train(data_dir, out_dir, epochs: int, seed: int, batch_size: int = 32, threads: int = 2,
           progress=print, lr: float = 3e-3, weight_decay: float = 5e-4, eval_every: int = 5,
-          warmup_epochs: float = 1.0, command: str | None = None) -> dict:
+          warmup_epochs: float = 1.0, command: str | None = None, device: str = "cpu",
+          arch: str = "base") -> dict:
     """Train on ``data_dir``/train.npz, validate on ``data_dir``/val.npz, and write to ``out_dir``:
     person_detector.onnx, person_detector.json (what the run was and its validation figures, also
     returned), person_detector.pt (the averaged weights) and train_log.jsonl (one row per epoch).
 
-    ``progress`` receives one line per epoch (JSON). The same arguments and thread count give
-    bit-identical weights. torch's global settings (threads, deterministic algorithms, flushing
-    denormals) are set for the run and put back afterwards.
+    ``device`` is "cpu" or a torch CUDA device ("cuda", "cuda:1"); ``arch`` a size from
+    `experiments.detector.net.ARCHS`. ``progress`` receives one line per epoch (JSON). On the
+    CPU the same arguments and thread count give bit-identical weights. torch's global settings
+    (threads, deterministic algorithms, flushing denormals) are set for the run and put back
+    afterwards.
     """
     torch = _torch()
+    from experiments.detector.net import ARCHS
+
+    if arch not in ARCHS:
+        raise ValueError(f"arch: unknown {arch!r}; expected one of {', '.join(ARCHS)}")
+    if str(device) != "cpu":
+        if not str(device).startswith("cuda"):
+            raise ValueError(f"device: expected 'cpu' or a CUDA device such as 'cuda', got {device!r}")
+        if not torch.cuda.is_available():
+            raise ValueError(f"device {device!r}: this torch ({torch.__version__}) sees no CUDA device")
     saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled())
     try:
         return _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, weight_decay,
-                      eval_every, warmup_epochs, command)
+                      eval_every, warmup_epochs, command, torch.device(device), arch)
     finally:
         torch.set_num_threads(saved[0])
         torch.use_deterministic_algorithms(saved[1])
         torch.set_flush_denormal(False)
 
 
-def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, weight_decay, eval_every,
-           warmup_epochs, command) -> dict:
+def _batch(train_images, train_boxes, idx: np.ndarray, rng: np.random.Generator):
+    """One augmented batch: images (B, 3, H, W) on the images' device and the targets as tensors
+    on that device."""
     torch = _torch()
-    from experiments.detector.net import build_model, count_parameters
+    dev = train_images.device
+    d = draw(rng, len(idx))
+    bs, igs = [], []
+    for j, i in enumerate(idx):
+        b, ig = move_boxes(train_boxes[i][:, :4], d, j, layout.INPUT_H, layout.INPUT_W)
+        bs.append(b)
+        igs.append(ig)
+    x = augment_images(train_images[torch.as_tensor(idx, device=dev)], d)
+    tbox, pos, ign = build_targets(bs, igs)
+    return x, torch.from_numpy(tbox).to(dev), torch.from_numpy(pos).to(dev), torch.from_numpy(ign).to(dev)
+
+
+def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, weight_decay, eval_every,
+           warmup_epochs, command, device, arch) -> dict:
+    torch = _torch()
+    from experiments.detector.net import build_model, count_parameters, describe
 
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     for split in ("train", "val"):
@@ -327,7 +304,9 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
     torch.set_num_threads(int(threads))
     torch.set_flush_denormal(True)  # denormal floats slowed CPU training some 50-fold
     torch.manual_seed(int(seed))
-    torch.use_deterministic_algorithms(True)
+    on_gpu = device.type == "cuda"
+    # CUDA has no deterministic version of a few kernels: warn about those rather than stop.
+    torch.use_deterministic_algorithms(True, warn_only=on_gpu)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xD7]))
 
     _mkdir(out_dir)
@@ -336,9 +315,11 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
     val_data = load_data(data_dir / "val.npz")
     n = len(train_data["images"])
     progress(f"train: {n} images, {sum(len(b) for b in train_data['boxes'])} boxes; "
-             f"val: {len(val_data['images'])} images; threads {threads}, batch {batch_size}")
+             f"val: {len(val_data['images'])} images; device {device}, arch {arch}, threads {threads}, "
+             f"batch {batch_size}")
+    train_images = torch.from_numpy(train_data["images"]).to(device)  # uint8, augmented a batch at a time
 
-    model = build_model().to(memory_format=torch.channels_last)
+    model = build_model(arch).to(device).to(memory_format=torch.channels_last)
     n_params = count_parameters(model)
     decay, no_decay = [], []
     for name, p in model.named_parameters():
@@ -357,30 +338,23 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
         model.train()
         t0 = time.time()
         order = rng.permutation(n)
-        sums = np.zeros(3)
+        sums = torch.zeros(3, device=device)  # summed on the device: no wait for it every step
         for k in range(steps_per_epoch):
             idx = order[k * batch_size:(k + 1) * batch_size]
-            xs, bs, igs = [], [], []
-            for i in idx:
-                gt = train_data["boxes"][i]
-                x, b, ig = augment(train_data["images"][i], gt[:, :4], rng)
-                xs.append(x)
-                bs.append(b)
-                igs.append(ig)
-            tbox, pos, ign = build_targets(bs, igs)
-            x = torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2)  # NHWC memory = channels_last
+            x, tbox, pos, ign = _batch(train_images, train_data["boxes"], idx, rng)
             for g in opt.param_groups:
                 g["lr"] = lr_at(step, total_steps, lr, warmup)
             out = model(x)
-            loss, lo, lr_ = detection_loss(out, torch.from_numpy(tbox), torch.from_numpy(pos), torch.from_numpy(ign))
+            loss, lo, lr_ = detection_loss(out, tbox, pos, ign)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
             opt.step()
             ema.update(model)
-            sums += [float(loss.detach()), float(lo.detach()), float(lr_.detach())]
+            sums += torch.stack([loss.detach(), lo.detach(), lr_.detach()])
             step += 1
             images_seen += len(idx)
+        sums = sums.cpu().numpy().astype(np.float64)
         dt = time.time() - t0
         train_time += dt
         row = {"epoch": epoch, "loss": sums[0] / steps_per_epoch, "obj_loss": sums[1] / steps_per_epoch,
@@ -418,16 +392,18 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
             command += f" --batch-size {batch_size}"
         if threads != 2:
             command += f" --threads {threads}"
+        if device.type != "cpu":
+            command += f" --device {device}"
+        if arch != "base":
+            command += f" --arch {arch}"
     info = {
         "model": f"{MODEL_NAME}.onnx",
         "sha256": sha256_of(onnx_path),
         "onnx_bytes": onnx_path.stat().st_size,
         "opset": OPSET,
         "parameters": n_params,
-        "architecture": "FastestDet-style: ShuffleNetV2-like backbone (repeats %s, channels %s), "
-                        "avg-pooled stride-8 + upsampled stride-32 + stride-16 concat, light SPP "
-                        "(5x5 depthwise stacks 1/2/3, residual), one anchor-free stride-16 head"
-                        % (list(_net_const("STAGE_REPEATS")), list(_net_const("STAGE_CHANNELS"))),
+        "architecture": describe(arch),
+        "arch": arch,
         "input": {"name": "images", "shape": [1, 3, layout.INPUT_H, layout.INPUT_W],
                   "format": "RGB float32 in [0, 1], resize_for_network then to_tensor"},
         "output": {"name": "preds", "shape": [1, layout.CHANNELS, layout.GRID_H, layout.GRID_W],
@@ -439,6 +415,7 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
         "epochs": int(epochs),
         "batch_size": int(batch_size),
         "threads": int(threads),
+        "device": torch.cuda.get_device_name(device) if on_gpu else "cpu",
         "lr": lr,
         "weight_decay": weight_decay,
         "train_data": _meta_summary(train_data["meta"]),
@@ -463,12 +440,6 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
 def _mkdir(p: Path) -> Path:
     p.mkdir(parents=True, exist_ok=True)
     return p
-
-
-def _net_const(name: str):
-    from experiments.detector import net
-
-    return getattr(net, name)
 
 
 if __name__ == "__main__":  # python -m experiments.detector.train DATA OUT EPOCHS SEED [BATCH THREADS]

@@ -85,6 +85,19 @@ def test_targets_follow_the_decode():
     np.testing.assert_allclose(boxes[0], t, atol=1e-5)
 
 
+def test_network_sizes_and_training_options_are_checked(data_dir, tmp_path):
+    assert count_parameters(build_model("base")) == count_parameters(build_model()) < count_parameters(build_model("wide")) <= 500_000
+    with pytest.raises(ValueError, match="unknown 'huge'"):
+        build_model("huge")
+    with pytest.raises(ValueError, match="arch: unknown 'huge'"):
+        tr.train(data_dir, tmp_path, epochs=1, seed=0, arch="huge")
+    with pytest.raises(ValueError, match="device"):
+        tr.train(data_dir, tmp_path, epochs=1, seed=0, device="tpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="sees no CUDA device"):
+            tr.train(data_dir, tmp_path, epochs=1, seed=0, device="cuda")
+
+
 def test_augmentation_keeps_boxes_on_the_people():
     rng = np.random.default_rng(0)
     img = np.zeros((layout.INPUT_H, layout.INPUT_W, 3), np.uint8)
