@@ -337,14 +337,14 @@ def _cmd_eval_detector(args) -> int:
     from experiments.detector.evaluate import average_precision
 
     model = Path(args.model) if args.model else SHIPPED_MODEL
-    load_record(model)  # a missing or corrupt model stops here with its name
-    data = _detector_data(args, splits=("val",))  # evaluation needs no training images
     from dodt.learned.views import parse_views
 
+    load_record(model)  # a missing or corrupt model stops here with its name
     try:
         views = parse_views(args.views)
     except ValueError as e:
         raise UserError(f"--views: {e}") from None
+    data = _detector_data(args, splits=("val",))  # evaluation needs no training images
     r = average_precision(model, data / "val.npz", max_distance=args.max_distance, nms_iou=args.nms_iou,
                           min_visible_px=args.min_visible_px, views=views)
     keys = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()

@@ -94,10 +94,10 @@ class PersonDetector2D:
 
     def raw(self, color: np.ndarray) -> np.ndarray:
         """The network's (5, GRID_H, GRID_W) output for one RGB uint8 image."""
-        x = layout.to_tensor(layout.resize_for_network(color))
-        return self.session.run(None, {self._input: x})[0][0]
+        return self._run(layout.resize_for_network(color))
 
     def _run(self, x: np.ndarray) -> np.ndarray:
+        """The raw output for one image already at the network size."""
         return self.session.run(None, {self._input: layout.to_tensor(x)})[0][0]
 
     def __call__(self, color: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

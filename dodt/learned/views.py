@@ -118,17 +118,6 @@ def sees_whole(view: View, box: np.ndarray) -> bool:
             and (not bottom or box[3] < view.y0 + (1.0 - EDGE) * view.h))
 
 
-def _iou_one(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    x1 = np.maximum(box[0], boxes[:, 0])
-    y1 = np.maximum(box[1], boxes[:, 1])
-    x2 = np.minimum(box[2], boxes[:, 2])
-    y2 = np.minimum(box[3], boxes[:, 3])
-    inter = np.clip(x2 - x1, 0, None) * np.clip(y2 - y1, 0, None)
-    area = (box[2] - box[0]) * (box[3] - box[1])
-    areas = (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
-    return inter / np.maximum(area + areas - inter, 1e-12)
-
-
 def fuse(per_view: Sequence[tuple[np.ndarray, np.ndarray]], views: Sequence[View],
          iou: float) -> tuple[np.ndarray, np.ndarray]:
     """Weighted box fusion of the views' boxes (image fractions), as the module docstring says.
@@ -148,7 +137,7 @@ def fuse(per_view: Sequence[tuple[np.ndarray, np.ndarray]], views: Sequence[View
     for k in np.argsort(-scores, kind="stable"):
         c = -1
         if n:
-            overlap = _iou_one(boxes[k], fused[:n])
+            overlap = layout.iou_one(boxes[k], fused[:n])
             c = int(np.argmax(overlap)) if overlap.max() > iou else -1
         if c < 0:
             c = n

@@ -244,10 +244,8 @@ def run_onnx(session, images: np.ndarray) -> np.ndarray:
 def detect_all(session, images: np.ndarray, views, score_threshold: float,
                nms_iou: float = NMS_IOU) -> list[tuple[np.ndarray, np.ndarray]]:
     """The run time's detections (`dodt.learned.views.detect`) of each image through ``views``."""
-    name = session.get_inputs()[0].name
-
     def run(x: np.ndarray) -> np.ndarray:
-        return session.run(["preds"], {name: layout.to_tensor(x)})[0][0]
+        return session.run(["preds"], {"images": layout.to_tensor(x)})[0][0]
 
     return [view_fusion.detect(run, img, views, score_threshold, nms_iou, floor=score_threshold) for img in images]
 
@@ -286,11 +284,8 @@ def average_precision(model_path, npz_path, max_distance: float = 10.0, iou: flo
             operating_threshold = DEFAULT_OPERATING_THRESHOLD
     view_list = tuple(v if isinstance(v, view_fusion.View) else view_fusion.parse_views([v])[0] for v in views)
     data = load_split(npz_path)
-    session = onnx_session(model_path, threads)
-    if view_list == (view_fusion.VIEWS["full"],):
-        detections = decode_all(run_onnx(session, data["images"]), score_threshold, nms_iou)
-    else:
-        detections = detect_all(session, data["images"], view_list, score_threshold, nms_iou)
+    # one full view is the plain decode and NMS (decode_all's), several are fused as at run time
+    detections = detect_all(onnx_session(model_path, threads), data["images"], view_list, score_threshold, nms_iou)
     out = evaluate_detections(detections, data["boxes"], max_distance, iou, operating_threshold, min_visible_px)
     out["score_threshold"] = float(score_threshold)
     out["nms_iou"] = float(nms_iou)

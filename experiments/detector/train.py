@@ -36,7 +36,7 @@ import numpy as np
 from dodt.learned import layout
 from dodt.learned.model import sha256_of
 from experiments.detector import evaluate
-from experiments.detector.augment import KEEP_FRACTION, augment, apply as augment_images, draw, move_boxes  # noqa: F401
+from experiments.detector.augment import apply as augment_images, draw, move_boxes
 
 MODEL_NAME = "person_detector"
 MAX_OFFSET = 0.85  # grid cells: the largest centre offset a positive cell must reach

@@ -12,6 +12,7 @@ from dodt.learned.model import sha256_of  # noqa: E402
 from experiments.detector import evaluate  # noqa: E402
 from experiments.detector.net import build_model, count_parameters  # noqa: E402
 from experiments.detector import train as tr  # noqa: E402
+from experiments.detector.augment import augment  # noqa: E402
 
 
 def synthetic_split(path, n: int, seed: int) -> None:
@@ -104,7 +105,7 @@ def test_augmentation_keeps_boxes_on_the_people():
     box = np.array([[0.4, 0.3, 0.5, 0.8]])
     img[int(0.3 * 256):int(0.8 * 256), int(0.4 * 352):int(0.5 * 352)] = 255
     for _ in range(20):
-        x, b, ig = tr.augment(img, box, rng)
+        x, b, ig = augment(img, box, rng)
         assert x.shape == img.shape and x.dtype == np.float32 and 0 <= x.min() and x.max() <= 1
         for x1, y1, x2, y2 in b:  # the box's inside is bright, its surroundings dark
             inner = x[int(y1 * 256) + 2:int(y2 * 256) - 2, int(x1 * 352) + 2:int(x2 * 352) - 2].mean()
