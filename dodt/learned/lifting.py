@@ -13,7 +13,10 @@ whole box when that holds too few valid depths), and d~ is their 30th percentile
 before the background: lifted boxes more than 0.5 m from every person fell from 23 % (median of
 the torso region) to 4 % on the circles scenario. The box is at least ``min_thickness`` deep and
 centred ``center_behind_median`` behind d~ (a body seen from the front shows only its front).
-The world box then passes the reference code's size sanity rule: a dimension less than half or
+Depths farther than a person of ``max_person_height`` showing as high as the 2D box could stand
+are dropped first (the background past a narrow far person, whose edges the depth camera leaves
+as holes), and a box whose d~ lies beyond ``max_lift_range`` is dropped (near the camera's range
+limit the far half of the noisy depths is missing). The world box then passes the reference code's size sanity rule: a dimension less than half or
 more than twice the person size is replaced by it, and a replaced height stands on the floor.
 """
 from __future__ import annotations
@@ -69,15 +72,24 @@ def size_sanity(lo: np.ndarray, hi: np.ndarray, cfg: LearnedConfig) -> tuple[np.
     return center - size / 2, center + size / 2
 
 
+def farthest_person_depth(box_px, K: CameraIntrinsics, height: float) -> float:
+    """The depth [m] beyond which a person ``height`` tall would show shorter than the box."""
+    return K.fy * height / max(float(box_px[3]) - float(box_px[1]), 1.0)
+
+
 def lift_box(depth_m: np.ndarray, box_px, K: CameraIntrinsics, T_world_camera: np.ndarray,
              cfg: LearnedConfig) -> Detection | None:
     """The 3D world box of one 2D person box, or None when the box holds too few valid depths."""
     depths = box_depths(depth_m, core_box(box_px, cfg), cfg)
     if depths.size < cfg.min_depth_pixels:
         depths = box_depths(depth_m, box_px, cfg)
+    if cfg.max_person_height is not None:
+        depths = depths[depths <= farthest_person_depth(box_px, K, cfg.max_person_height)]
     if depths.size < cfg.min_depth_pixels:
         return None
     med, d_min, d_max = mad_depth_range(depths, cfg.mad_n, cfg.depth_percentile)
+    if cfg.max_lift_range is not None and med > cfg.max_lift_range:
+        return None
     # The paper centres the box on the median plane; a body's visible surface lies in front of its
     # centre, so ours sits ``center_behind_median`` further back. Its depth is the MAD range's.
     mid = med + cfg.center_behind_median

@@ -1,4 +1,6 @@
 """YOLO-MAD without the network: MAD lifting of a 2D box on synthetic depth, and the fusion rules."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -6,7 +8,7 @@ from dodt.config import LearnedConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics
 from dodt.learned.fusion import fuse_learned
-from dodt.learned.lifting import lift_box, mad_depth_range, size_sanity
+from dodt.learned.lifting import farthest_person_depth, lift_box, mad_depth_range, size_sanity
 
 K = CameraIntrinsics()
 CFG = LearnedConfig()
@@ -76,6 +78,28 @@ def test_mad_range_rules():
     assert mad_depth_range(np.array([]), 1.5) is None
     med, lo, hi = mad_depth_range(np.array([4.0, 4.1, 4.05, 3.95, 9.0, 1.0, 4.02]), 1.5)
     assert med == pytest.approx(4.02) and lo == pytest.approx(3.95) and hi == pytest.approx(4.1)
+
+
+def test_depths_farther_than_a_person_of_the_box_height_are_not_read():
+    """A far person with most of his depths lost to edge holes: the wall behind him holds most of the
+    valid depths in the box. The box's height says how far a person can stand, which keeps the wall out."""
+    x = 6.0
+    depth, (x1, y1, x2, y2) = _scene(x, 0.0, seed=3)
+    box = (x1 - (x2 - x1), y1, x2 + (x2 - x1), y2)  # as wide as a walker's swinging arms and legs
+    person = np.abs(depth - (x - 0.17)) < 0.5
+    holes = person & (np.random.default_rng(1).random(depth.shape) < 0.85)
+    depth[holes] = 0.0
+    unbounded = lift_box(depth, box, K, T, replace(CFG, max_person_height=None))
+    assert unbounded is not None and unbounded.center[0] > x + 1.0  # lifted onto the wall at 9 m
+    det = lift_box(depth, box, K, T, CFG)
+    assert det is not None and abs(det.center[0] - CFG.center_behind_median - (x - 0.17)) < 0.10, det.center
+    assert farthest_person_depth(box, K, 2.0) == pytest.approx(K.fy * 2.0 / (box[3] - box[1]))
+
+
+def test_a_box_lifted_beyond_the_lift_range_is_dropped():
+    depth, box = _scene(8.0, 0.3)
+    assert lift_box(depth, box, K, T, CFG) is not None
+    assert lift_box(depth, box, K, T, replace(CFG, max_lift_range=7.5)) is None
 
 
 def test_too_few_depths_give_no_box():
