@@ -334,11 +334,10 @@ def _cmd_pack_detector_data(args) -> int:
 
 def _cmd_eval_detector(args) -> int:
     from dodt.learned.model import SHIPPED_MODEL, load_record
+    from dodt.learned.views import parse_views
     from experiments.detector.evaluate import average_precision
 
     model = Path(args.model) if args.model else SHIPPED_MODEL
-    from dodt.learned.views import parse_views
-
     load_record(model)  # a missing or corrupt model stops here with its name
     try:
         views = parse_views(args.views)

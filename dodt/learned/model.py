@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from dodt.learned import layout
+from dodt.learned.views import detect, parse_views
 
 SHIPPED_MODEL = Path(__file__).resolve().parent.parent / "models" / "person_detector.onnx"
 
@@ -71,8 +72,6 @@ class PersonDetector2D:
 
     def __init__(self, model_path: str | Path | None = None, score_threshold: float | None = None,
                  nms_iou: float = 0.45, threads: int = 1, views=("full",)):
-        from dodt.learned.views import parse_views
-
         try:
             self.views = parse_views(views)
         except ValueError as e:
@@ -101,8 +100,6 @@ class PersonDetector2D:
         return self.session.run(None, {self._input: layout.to_tensor(x)})[0][0]
 
     def __call__(self, color: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from dodt.learned.views import detect
-
         boxes, scores = detect(self._run, color, self.views, self.score_threshold, self.nms_iou,
                                floor=self.score_threshold)
         h, w = color.shape[:2]
