@@ -16,8 +16,9 @@ centred ``center_behind_median`` behind d~ (a body seen from the front shows onl
 Depths farther than a person of ``max_person_height`` showing as high as the 2D box could stand
 are dropped first (the background past a narrow far person, whose edges the depth camera leaves
 as holes), and a box whose d~ lies beyond ``max_lift_range`` is dropped (near the camera's range
-limit the far half of the noisy depths is missing). The world box then passes the reference code's size sanity rule: a dimension less than half or
-more than twice the person size is replaced by it, and a replaced height stands on the floor.
+limit the far half of the noisy depths is missing). The world box then passes the reference
+code's size sanity rule: a dimension less than half or more than twice the person size is
+replaced by it, and a replaced height stands on the floor.
 """
 from __future__ import annotations
 
