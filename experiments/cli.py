@@ -288,7 +288,7 @@ def _cmd_train_detector(args) -> int:
         raise UserError("--epochs: must be >= 1")
     if args.threads < 1:
         raise UserError("--threads: must be >= 1")
-    from experiments.detector.train import train
+    from experiments.detector.train import option_flags, train
 
     if args.batch_size < 2:
         raise UserError("--batch-size: must be >= 2 (BatchNorm)")
@@ -302,11 +302,7 @@ def _cmd_train_detector(args) -> int:
     command = (f"dodt-nav train-detector --data {args.data} --train-seeds {args.train_seeds} --val-seeds "
                f"{args.val_seeds} --images-per-seed {args.images_per_seed} --epochs {args.epochs} --seed {args.seed} "
                f"--threads {args.threads}")
-    for flag, value, default in (("--device", args.device, "cpu"), ("--arch", args.arch, "base"),
-                                 ("--batch-size", args.batch_size, 32), ("--lr", args.lr, 3e-3),
-                                 ("--warmup-epochs", args.warmup_epochs, 1.0)):
-        if value != default:
-            command += f" {flag} {value}"
+    command += option_flags(args.device, args.arch, args.batch_size, args.lr, args.warmup_epochs)
     try:
         record = train(data, Path(args.out), epochs=args.epochs, seed=args.seed, threads=args.threads,
                        command=command, device=args.device, arch=args.arch, batch_size=args.batch_size,

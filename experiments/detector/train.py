@@ -239,6 +239,18 @@ def _meta_summary(meta: dict) -> dict:
     return {k: meta[k] for k in keys if k in meta}
 
 
+def option_flags(device: str, arch: str, batch_size: int, lr: float, warmup_epochs: float) -> str:
+    """The train-detector flags for the options that differ from train()'s defaults, for the
+    command written into a model's record."""
+    flags = ""
+    for flag, value, default in (("--device", device, "cpu"), ("--arch", arch, "base"),
+                                 ("--batch-size", batch_size, 32), ("--lr", lr, 3e-3),
+                                 ("--warmup-epochs", warmup_epochs, 1.0)):
+        if value != default:
+            flags += f" {flag} {value}"
+    return flags
+
+
 def train(data_dir, out_dir, epochs: int, seed: int, batch_size: int = 32, threads: int = 2,
           progress=print, lr: float = 3e-3, weight_decay: float = 5e-4, eval_every: int = 5,
           warmup_epochs: float = 1.0, command: str | None = None, device: str = "cpu",
@@ -388,14 +400,9 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
                                             operating_threshold=threshold, threads=threads)
     if command is None:
         command = f"dodt-nav train-detector --data {data_dir} --epochs {int(epochs)} --seed {int(seed)}"
-        if batch_size != 32:
-            command += f" --batch-size {batch_size}"
         if threads != 2:
             command += f" --threads {threads}"
-        if device.type != "cpu":
-            command += f" --device {device}"
-        if arch != "base":
-            command += f" --arch {arch}"
+        command += option_flags(str(device), arch, batch_size, lr, warmup_epochs)
     info = {
         "model": f"{MODEL_NAME}.onnx",
         "sha256": sha256_of(onnx_path),
