@@ -176,6 +176,9 @@ class DODT:
         t1 = time.perf_counter()
         self.tracker.correct(dets, pairs, seq, stamp, T[:3, 3])
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
+        boxes_2d = getattr(self.learned_detector, "last_boxes_2d", None)
+        if boxes_2d is not None and frame.color is not None:
+            self.tracker.drop_unseen_people(boxes_2d, depth_m, frame.intrinsics, T)
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
             tr.identify(seq, self.poses, self.clouds.get, frame.intrinsics, self.cfg.depth.depth_max)

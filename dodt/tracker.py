@@ -266,6 +266,42 @@ class Tracker:
         self.tracks = keep
         return dropped
 
+    def drop_unseen_people(self, boxes_2d: np.ndarray, depth_m: np.ndarray, K: CameraIntrinsics,
+                           T_world_camera: np.ndarray) -> int:
+        """Delete coasting person tracks that the learned detector should see and does not: after
+        ``learned.unseen_after`` missed frames, the track's image box lies wholly in the view,
+        less than ``learned.unseen_occluder_fraction`` of the valid depths in it lie in front of
+        the track (nearer than its centre by half its width and 0.3 m: nothing hides it), and no
+        2D person box of this frame (``boxes_2d``, pixels) overlaps it by ``learned.unseen_iou``.
+        Returns how many."""
+        lc, dc = self.cfg.learned, self.cfg.depth
+        if lc.unseen_after <= 0:
+            return 0
+        R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
+        H, W = depth_m.shape
+        boxes = np.asarray(boxes_2d, dtype=np.float64).reshape(-1, 4)
+        keep, dropped = [], 0
+        for tr in self.tracks:
+            if tr.coasting and tr.is_person and tr.missed >= lc.unseen_after:
+                pc = (np.array([*tr.center_xy, tr.z]) - t) @ R
+                if dc.depth_min <= pc[2] <= lc.depth_max:
+                    half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
+                    half_h = 0.5 * tr.size[2] * K.fy / pc[2]
+                    u = K.fx * pc[0] / pc[2] + K.cx
+                    v = K.fy * pc[1] / pc[2] + K.cy
+                    b = np.array([u - half_w, v - half_h, u + half_w, v + half_h])
+                    if b[0] >= 0 and b[1] >= 0 and b[2] <= W - 1 and b[3] <= H - 1:
+                        win = depth_m[int(b[1]):int(b[3]) + 1:2, int(b[0]):int(b[2]) + 1:2]
+                        win = win[win > 0]
+                        front = pc[2] - 0.5 * max(tr.size[0], tr.size[1]) - 0.3
+                        hidden = win.size > 0 and np.mean(win < front) >= lc.unseen_occluder_fraction
+                        if not hidden and not np.any(_iou_2d(b, boxes) >= lc.unseen_iou):
+                            dropped += 1
+                            continue
+            keep.append(tr)
+        self.tracks = keep
+        return dropped
+
     def associate(self, dets: list[Detection], camera: np.ndarray) -> list[tuple[int, int]]:
         views = [t.view() for t in self.tracks]
         scores, thr = similarity_matrix(views, dets, self.cfg.association, camera)
@@ -323,3 +359,14 @@ class Tracker:
                 survivors.append(Track(self._next_id, det, seq, stamp, self.cfg))
                 self._next_id += 1
         self.tracks = survivors
+
+
+def _iou_2d(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """IoU of one image box (x1, y1, x2, y2) with each of ``boxes`` (N, 4)."""
+    if len(boxes) == 0:
+        return np.zeros(0)
+    w = np.clip(np.minimum(box[2], boxes[:, 2]) - np.maximum(box[0], boxes[:, 0]), 0, None)
+    h = np.clip(np.minimum(box[3], boxes[:, 3]) - np.maximum(box[1], boxes[:, 1]), 0, None)
+    inter = w * h
+    area = (box[2] - box[0]) * (box[3] - box[1]) + (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+    return inter / np.maximum(area - inter, 1e-9)

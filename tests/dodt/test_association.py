@@ -424,6 +424,47 @@ def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
     assert (feed.tracker.tracks == []) == dropped
 
 
+@pytest.mark.parametrize("case, dropped", [
+    ("open", True),  # in full view, nothing in front of it, no person box over it: not there
+    ("box", False),  # the learned detector finds a person over it: it may be him, missed by the association
+    ("hidden", False),  # something nearer covers its place: the person may be behind it
+    ("off", False),  # the rule turned off (learned.unseen_after = 0)
+    ("static", False),  # not a person track: left to the seen-through rule
+])
+def test_an_unseen_coasting_person_track_is_dropped(case, dropped):
+    """A standing person track 4 m in front of the camera loses its detections. After
+    learned.unseen_after missed frames it is dropped when its place is in full view, nothing
+    nearer hides it and no 2D person box of the frame overlaps its image box."""
+    import dataclasses
+
+    from tests.dodt.synthetic import camera_pose, render_depth
+    from dodt.frames import CameraIntrinsics
+
+    cfg = DODTConfig()
+    after = 0 if case == "off" else 4
+    cfg = dataclasses.replace(cfg, learned=dataclasses.replace(cfg.learned, enabled=True, unseen_after=after))
+    K, T = CameraIntrinsics(), camera_pose(z=1.2)
+    boxes = [((9.0, -3.0, 0.0), (9.2, 3.0, 3.0))]  # a wall 5 m behind the place
+    if case == "hidden":
+        boxes.append(((2.0, -1.0, 0.0), (2.2, 1.0, 2.5)))
+    depth = render_depth(K, T, boxes)
+    feed = Feed(cfg)
+    for k in range(5):
+        feed(k / FPS, [np.array([4.0, 0.0, 0.9])], person=(case != "static"))
+    assert feed.tracker.tracks[0].is_person == (case != "static")
+    # the person's image box at 4 m: centre column cx, about 0.5 m wide and 1.8 m tall
+    u, half_w, half_h = K.cx, 0.25 * K.fx / 4.0, 0.9 * K.fy / 4.0
+    v = K.cy + K.fy * (1.2 - 0.9) / 4.0
+    box = np.array([[u - half_w, v - half_h, u + half_w, v + half_h]]) if case == "box" else np.zeros((0, 4))
+    gone = []
+    for k in range(5, 5 + 4 + 1):
+        feed(k / FPS, [])
+        feed.tracker.drop_unseen_people(box, depth, K, T)
+        gone.append(feed.tracker.tracks == [])
+    assert gone[-1] == dropped
+    assert not any(gone[:3])  # never before unseen_after missed frames
+
+
 @pytest.mark.parametrize("x, person, coasts", [
     (7.0, True, 0.4),   # a person beyond the depth range (5.5 m): its learned boxes were its only detections
     (3.0, True, 1.0),   # within it the ensemble sees him too: the usual coast time
