@@ -465,6 +465,50 @@ def test_an_unseen_coasting_person_track_is_dropped(case, dropped):
     assert not any(gone[:3])  # never before unseen_after missed frames
 
 
+class _StandInLearned:
+    """A learned module that adds one person box 4 m ahead for the first ``frames`` frames and finds
+    no 2D person box after that (``last_boxes_2d`` is what DODT.process reads)."""
+
+    def __init__(self, frames: int):
+        self.frames, self.k = frames, 0
+        self.last_boxes_2d = np.zeros((0, 4), np.float32)
+        self.last_3d = []
+
+    def __call__(self, frame, depth_m, fused):
+        self.k += 1
+        if self.k > self.frames:
+            return list(fused)
+        d = det((4.0, 0.0, 0.85), seed=self.k)
+        d.source, d.is_person = "learned", True
+        return list(fused) + [d]
+
+
+@pytest.mark.parametrize("after, gone", [(6, True), (0, False)])
+def test_the_pipeline_drops_an_unseen_person_track(after, gone):
+    """DODT.process applies the unseen-person rule with the learned module's 2D boxes of the frame:
+    a person track whose boxes stop, with nothing behind it within the camera's range (no valid
+    depth: the seen-through rule cannot drop it), is gone 8 frames later with
+    learned.unseen_after = 6, and still coasting with the rule off."""
+    from dodt.frames import CameraIntrinsics, SensorFrame
+    from dodt.pipeline import DODT
+    from tests.dodt.synthetic import camera_pose
+
+    cfg = DODTConfig()
+    cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after))
+    K, T = CameraIntrinsics(), camera_pose(z=1.2)
+    depth_mm = np.zeros((K.height, K.width), np.uint16)
+    color = np.zeros((K.height, K.width, 3), np.uint8)
+    pipe = DODT(cfg, learned_detector=_StandInLearned(frames=5))
+    people = []
+    for k in range(5 + 8):
+        r = pipe.process(SensorFrame(depth=depth_mm, color=color, intrinsics=K, T_world_camera=T,
+                                     stamp=k / FPS, seq=k))
+        people.append([o for o in r.obstacles if o.is_person])
+    assert len(people[4]) == 1  # the person track stands 4 m ahead
+    assert (people[-1] == []) == gone
+    assert not gone or people[-1] == [] and people[-4] != []  # not before 6 missed frames
+
+
 @pytest.mark.parametrize("x, person, coasts", [
     (7.0, True, 0.4),   # a person beyond the depth range (5.5 m): its learned boxes were its only detections
     (3.0, True, 1.0),   # within it the ensemble sees him too: the usual coast time
