@@ -181,3 +181,16 @@ def test_a_track_is_a_person_only_when_person_boxes_recur():
     tr.update(_box((3, 0, 0.85)), 3, 0.1)
     tr.update(_box((3, 0, 0.85)), 4, 0.133)
     assert not tr.is_person  # a false box does not label a static obstacle for good
+
+
+def test_fusion_does_not_mark_the_wall_behind_a_person_a_person():
+    """A person 0.3 m in front of a wall segment: his lifted box overlaps the segment's fused box
+    (their mutual best match), but the centres lie 0.6 m apart, beyond person_match_gate (0.5 m):
+    the wall stays unmarked. With the gate off (0), the reference's rule marks it."""
+    wall = _box((4.1, 0.0, 1.0), (0.4, 1.2, 2.0))
+    person = _box((3.5, 0.0, 0.9), (1.2, 0.5, 1.8), True, "learned")  # thick: MAD kept some wall depths
+    assert CFG.person_match_gate == 0.5
+    out = fuse_learned([wall], [person], np.zeros(3), CFG)
+    assert out == [wall] and not out[0].is_person  # overlapping, so not added either
+    out = fuse_learned([wall], [person], np.zeros(3), LearnedConfig(person_match_gate=0.0))
+    assert out[0].is_person
