@@ -22,6 +22,7 @@ from dodt.frames import CameraIntrinsics
 from dodt.geometry import wrap_angle
 from dodt.identification import decide, is_candidate, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
+from dodt.learned.layout import iou_one
 from dodt.result import TrackedObstacle
 
 
@@ -201,6 +202,17 @@ class Track:
         self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg)
         self.dynamic_history.append(self.geometric_dynamic)
 
+    def camera_point(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """The predicted centre in the camera frame of pose (R, t)."""
+        return (np.array([*self.center_xy, self.z]) - t) @ R
+
+    def image_box(self, pc: np.ndarray, K: CameraIntrinsics) -> tuple[float, float, float, float]:
+        """(u, v, half width, half height) in pixels of the obstacle's box seen with its centre
+        at ``pc`` (camera frame, in front of the camera), its widest horizontal side facing it."""
+        half_w = 0.5 * max(self.size[0], self.size[1]) * K.fx / pc[2]
+        half_h = 0.5 * self.size[2] * K.fy / pc[2]
+        return K.fx * pc[0] / pc[2] + K.cx, K.fy * pc[1] / pc[2] + K.cy, half_w, half_h
+
     def output(self, stamp: float) -> TrackedObstacle:
         h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
         return TrackedObstacle(
@@ -243,15 +255,11 @@ class Tracker:
         person_reach = max(self.cfg.learned.depth_max, dc.depth_max) if self.cfg.learned.enabled else dc.depth_max
         for tr in self.tracks:
             if tr.coasting and tr.missed >= tc.seen_through_after:
-                c = np.array([*tr.center_xy, tr.z]) - t
-                pc = c @ R
+                pc = tr.camera_point(R, t)
                 reach = person_reach if tr.is_person else dc.depth_max
                 if dc.depth_min <= pc[2] <= reach:
                     margin = tc.seen_through_margin * max(1.0, (pc[2] / dc.depth_max) ** 2)
-                    half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
-                    half_h = 0.5 * tr.size[2] * K.fy / pc[2]
-                    u = K.fx * pc[0] / pc[2] + K.cx
-                    v = K.fy * pc[1] / pc[2] + K.cy
+                    u, v, half_w, half_h = tr.image_box(pc, K)
                     u0, u1 = int(max(u - half_w, 0)), int(min(u + half_w, W - 1))
                     v0, v1 = int(max(v - half_h, 0)), int(min(v + half_h, H - 1))
                     inside = (u1 - u0) >= 0.6 * 2 * half_w and (v1 - v0) >= 0.6 * 2 * half_h
@@ -283,19 +291,16 @@ class Tracker:
         keep, dropped = [], 0
         for tr in self.tracks:
             if tr.coasting and tr.is_person and tr.missed >= lc.unseen_after:
-                pc = (np.array([*tr.center_xy, tr.z]) - t) @ R
+                pc = tr.camera_point(R, t)
                 if dc.depth_min <= pc[2] <= lc.depth_max:
-                    half_w = 0.5 * max(tr.size[0], tr.size[1]) * K.fx / pc[2]
-                    half_h = 0.5 * tr.size[2] * K.fy / pc[2]
-                    u = K.fx * pc[0] / pc[2] + K.cx
-                    v = K.fy * pc[1] / pc[2] + K.cy
+                    u, v, half_w, half_h = tr.image_box(pc, K)
                     b = np.array([u - half_w, v - half_h, u + half_w, v + half_h])
                     if b[0] >= 0 and b[1] >= 0 and b[2] <= W - 1 and b[3] <= H - 1:
                         win = depth_m[int(b[1]):int(b[3]) + 1:2, int(b[0]):int(b[2]) + 1:2]
                         win = win[win > 0]
                         front = pc[2] - 0.5 * max(tr.size[0], tr.size[1]) - 0.3
                         hidden = win.size > 0 and np.mean(win < front) >= lc.unseen_occluder_fraction
-                        if not hidden and not np.any(_iou_2d(b, boxes) >= lc.unseen_iou):
+                        if not hidden and not np.any(iou_one(b, boxes) >= lc.unseen_iou):
                             dropped += 1
                             continue
             keep.append(tr)
@@ -360,13 +365,3 @@ class Tracker:
                 self._next_id += 1
         self.tracks = survivors
 
-
-def _iou_2d(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """IoU of one image box (x1, y1, x2, y2) with each of ``boxes`` (N, 4)."""
-    if len(boxes) == 0:
-        return np.zeros(0)
-    w = np.clip(np.minimum(box[2], boxes[:, 2]) - np.maximum(box[0], boxes[:, 0]), 0, None)
-    h = np.clip(np.minimum(box[3], boxes[:, 3]) - np.maximum(box[1], boxes[:, 1]), 0, None)
-    inter = w * h
-    area = (box[2] - box[0]) * (box[3] - box[1]) + (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
-    return inter / np.maximum(area - inter, 1e-9)

@@ -435,14 +435,12 @@ def test_an_unseen_coasting_person_track_is_dropped(case, dropped):
     """A standing person track 4 m in front of the camera loses its detections. After
     learned.unseen_after missed frames it is dropped when its place is in full view, nothing
     nearer hides it and no 2D person box of the frame overlaps its image box."""
-    import dataclasses
-
     from tests.dodt.synthetic import camera_pose, render_depth
     from dodt.frames import CameraIntrinsics
 
     cfg = DODTConfig()
     after = 0 if case == "off" else 4
-    cfg = dataclasses.replace(cfg, learned=dataclasses.replace(cfg.learned, enabled=True, unseen_after=after))
+    cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after))
     K, T = CameraIntrinsics(), camera_pose(z=1.2)
     boxes = [((9.0, -3.0, 0.0), (9.2, 3.0, 3.0))]  # a wall 5 m behind the place
     if case == "hidden":
