@@ -4,8 +4,9 @@ step 2), and the module the pipeline calls.
 - A learned box that is the mutual best match of a fused box (both IoUs above the threshold)
   marks it a person (dynamic in identification once the track's person boxes recur); the box
   stays the geometric one, measured from depth (``match_box = "union"``: the reference's union).
-  Ours: only when their centres lie within ``person_match_gate`` of each other; farther, the
-  fused box is the wall or obstacle behind the person and stays as it is.
+  Ours: only when their centres lie within ``person_match_gate`` of each other and the fused
+  box is no taller than ``person_box_max_height``; otherwise the fused box is the wall or
+  obstacle behind the person and stays as it is.
 - A learned box that overlaps no fused box is added when it is at least ``overwrite_distance``
   from the camera: there the depth is too sparse for the geometric detectors, which is what the
   module is for; closer, the geometric detectors should have seen it, and it is taken for a
@@ -41,6 +42,8 @@ def fuse_learned(fused: list[Detection], learned: list[Detection], camera: np.nd
     for i, j in mutual_best_pairs(iou, cfg.iou_threshold):
         a, b = learned[i], fused[j]
         if cfg.person_match_gate > 0 and float(np.hypot(*(a.center[:2] - b.center[:2]))) > cfg.person_match_gate:
+            continue
+        if cfg.person_box_max_height > 0 and float(b.size[2]) > cfg.person_box_max_height:
             continue
         if cfg.match_box == "union":
             lo, hi = np.minimum(a.lower, b.lower), np.maximum(a.upper, b.upper)

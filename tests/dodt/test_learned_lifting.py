@@ -194,3 +194,16 @@ def test_fusion_does_not_mark_the_wall_behind_a_person_a_person():
     assert out == [wall] and not out[0].is_person  # overlapping, so not added either
     out = fuse_learned([wall], [person], np.zeros(3), LearnedConfig(person_match_gate=0.0))
     assert out[0].is_person
+
+
+def test_fusion_does_not_mark_a_box_taller_than_a_person_a_person():
+    """A 2D box cut by the image's side edge reads the obstacle behind the person, and its lifted
+    box lands on that 3 m tall obstacle, within person_match_gate of its centre: the obstacle is
+    no person (person_box_max_height 2.5 m). With the bound off (0), it is marked."""
+    obstacle = _box((6.87, -2.95, 1.48), (1.15, 0.47, 2.96))
+    lifted = _box((6.55, -2.88, 0.9), (0.5, 0.45, 1.8), True, "learned")
+    assert CFG.person_box_max_height == 2.5
+    out = fuse_learned([obstacle], [lifted], np.zeros(3), CFG)
+    assert out == [obstacle] and not out[0].is_person
+    out = fuse_learned([obstacle], [lifted], np.zeros(3), LearnedConfig(person_box_max_height=0.0))
+    assert out[0].is_person
