@@ -6,7 +6,9 @@ step 2), and the module the pipeline calls.
   stays the geometric one, measured from depth (``match_box = "union"``: the reference's union).
   Ours: only when their centres lie within ``person_match_gate`` of each other and the fused
   box is no taller than ``person_box_max_height``; otherwise the fused box is the wall or
-  obstacle behind the person and stays as it is.
+  obstacle behind the person and stays as it is. And where the fused box is lower than
+  ``fragment_height`` times the learned box, it is a fragment of the person (the part within the
+  depth range, or in view): the union of the two replaces it.
 - A learned box that overlaps no fused box is added when it is at least ``overwrite_distance``
   from the camera: there the depth is too sparse for the geometric detectors, which is what the
   module is for; closer, the geometric detectors should have seen it, and it is taken for a
@@ -45,7 +47,8 @@ def fuse_learned(fused: list[Detection], learned: list[Detection], camera: np.nd
             continue
         if cfg.person_box_max_height > 0 and float(b.size[2]) > cfg.person_box_max_height:
             continue
-        if cfg.match_box == "union":
+        fragment = float(b.size[2]) < cfg.fragment_height * float(a.size[2])
+        if cfg.match_box == "union" or fragment:
             lo, hi = np.minimum(a.lower, b.lower), np.maximum(a.upper, b.upper)
             merged = Detection.from_bounds(lo, hi, source="ensemble+learned")  # no points: the pipeline adds them
         else:

@@ -207,3 +207,22 @@ def test_fusion_does_not_mark_a_box_taller_than_a_person_a_person():
     assert out == [obstacle] and not out[0].is_person
     out = fuse_learned([obstacle], [lifted], np.zeros(3), LearnedConfig(person_box_max_height=0.0))
     assert out[0].is_person
+
+
+def test_fusion_replaces_a_fragment_of_the_person_by_the_union():
+    """Near the depth range's end the geometric detectors see the part of a person within range,
+    a box a metre lower than the person's lifted box: the union of the two replaces it (marked a
+    person, its points gathered later by the pipeline), so a track fed by the lifted box can take
+    it. A fused box as high as the learned one stays as it is."""
+    fragment = _box((5.9, 1.18, 0.71), (0.44, 0.27, 0.51))
+    lifted = _box((5.91, 1.21, 0.85), (0.35, 0.8, 1.8), True, "learned")
+    out = fuse_learned([fragment], [lifted], np.zeros(3), CFG)
+    assert len(out) == 1 and out[0].is_person and out[0].source == "ensemble+learned"
+    assert np.allclose(out[0].lower, np.minimum(fragment.lower, lifted.lower))
+    assert np.allclose(out[0].upper, np.maximum(fragment.upper, lifted.upper))
+    assert len(out[0].points) == 0
+    out = fuse_learned([fragment], [lifted], np.zeros(3), LearnedConfig(fragment_height=0.0))
+    assert out[0].is_person and np.allclose(out[0].size, fragment.size)  # the rule off: the fragment kept
+    whole = _box((5.9, 1.18, 0.85), (0.5, 0.5, 1.7))
+    out = fuse_learned([whole], [lifted], np.zeros(3), CFG)
+    assert out[0].is_person and np.allclose(out[0].size, whole.size)
