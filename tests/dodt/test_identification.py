@@ -189,8 +189,9 @@ def test_an_obstacle_wider_than_any_walker_is_not_voted_on():
 
 def test_a_person_label_does_not_lock_a_standing_obstacle_dynamic():
     """A standing obstacle that a learned detector called a person for 15 frames is dynamic while
-    the label lasts, and static again two frames after its last person box: the person label does
-    not feed the geometric label's force-dynamic lock (10 dynamic frames of the last 30)."""
+    the label lasts (from its third frame: learned.person_min of the last person_window boxes),
+    and static again at its first frame without one: the person label does not feed the
+    geometric label's force-dynamic lock (10 dynamic frames of the last 30)."""
     from dodt.config import DODTConfig
     from dodt.detection import Detection
     from dodt.tracker import Track
@@ -210,6 +211,7 @@ def test_a_person_label_does_not_lock_a_standing_obstacle_dynamic():
             track.update(det, k, k * dt)
         track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
         labels.append(track.dynamic)
-    assert all(labels[1:15])  # 2 of the last 3 boxes were person boxes: dynamic at once
-    assert not any(labels[16:])  # 2 of the last 3 were not
+    assert (cfg.learned.person_min, cfg.learned.person_window) == (3, 3)
+    assert not any(labels[:2]) and all(labels[2:15])  # the last 3 boxes were person boxes: dynamic
+    assert not any(labels[15:])  # one of the last 3 was not
     assert not track.geometric_dynamic

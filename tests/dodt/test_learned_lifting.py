@@ -172,15 +172,20 @@ def test_a_track_is_a_person_only_when_person_boxes_recur():
     from dodt.tracker import Track
 
     cfg = DODTConfig()
+    assert (cfg.learned.person_min, cfg.learned.person_window) == (3, 3)
     tr = Track(1, _box((3, 0, 0.85), person=True), 0, 0.0, cfg)
     assert not tr.is_person  # one box: 1 of person_window, fewer than person_min
-    tr.update(_box((3, 0, 0.85)), 1, 0.033)
-    assert not tr.is_person
+    tr.update(_box((3, 0, 0.85), person=True), 1, 0.033)
+    assert not tr.is_person  # 2 of 3
     tr.update(_box((3, 0, 0.85), person=True), 2, 0.067)
-    assert tr.is_person  # 2 of the last 3
+    assert tr.is_person  # 3 of the last 3: labelled at its third frame
     tr.update(_box((3, 0, 0.85)), 3, 0.1)
-    tr.update(_box((3, 0, 0.85)), 4, 0.133)
     assert not tr.is_person  # a false box does not label a static obstacle for good
+    loose = replace(cfg, learned=replace(cfg.learned, person_min=2))
+    tr = Track(2, _box((3, 0, 0.85), person=True), 0, 0.0, loose)
+    tr.update(_box((3, 0, 0.85)), 1, 0.033)
+    tr.update(_box((3, 0, 0.85), person=True), 2, 0.067)
+    assert tr.is_person  # 2 of the last 3 with person_min = 2
 
 
 def test_fusion_does_not_mark_the_wall_behind_a_person_a_person():
