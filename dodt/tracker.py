@@ -87,9 +87,18 @@ class Track:
     def center_xy(self) -> np.ndarray:
         return self.kf.position + self.offset
 
+    @property
+    def center(self) -> np.ndarray:
+        """The 3D centre: x, y filtered, z from the latest detection (a new array)."""
+        return np.array([*self.center_xy, self.z])
+
+    @property
+    def half_width(self) -> float:
+        """Half the obstacle's widest horizontal side [m]."""
+        return 0.5 * max(self.size[0], self.size[1])
+
     def view(self) -> TrackView:
-        c = np.array([*self.center_xy, self.z])
-        return TrackView(center=c, size=self.det_size, count=self.count, spread=self.spread,
+        return TrackView(center=self.center, size=self.det_size, count=self.count, spread=self.spread,
                          position_variance=self.kf.position_variance)
 
     def _turn_compensated(self, v: np.ndarray, stamp: float, span: float) -> np.ndarray:
@@ -204,19 +213,19 @@ class Track:
 
     def camera_point(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """The predicted centre in the camera frame of pose (R, t)."""
-        return (np.array([*self.center_xy, self.z]) - t) @ R
+        return (self.center - t) @ R
 
     def image_box(self, pc: np.ndarray, K: CameraIntrinsics) -> tuple[float, float, float, float]:
         """(u, v, half width, half height) in pixels of the obstacle's box seen with its centre
         at ``pc`` (camera frame, in front of the camera), its widest horizontal side facing it."""
-        half_w = 0.5 * max(self.size[0], self.size[1]) * K.fx / pc[2]
+        half_w = self.half_width * K.fx / pc[2]
         half_h = 0.5 * self.size[2] * K.fy / pc[2]
         return K.fx * pc[0] / pc[2] + K.cx, K.fy * pc[1] / pc[2] + K.cy, half_w, half_h
 
     def output(self, stamp: float) -> TrackedObstacle:
         h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
         return TrackedObstacle(
-            id=self.id, center=np.array([*self.center_xy, self.z]), size=self.size.copy(),
+            id=self.id, center=self.center, size=self.size.copy(),
             velocity=np.array([self.kf.velocity[0], self.kf.velocity[1], 0.0]),
             acceleration=np.array([self.kf.acceleration[0], self.kf.acceleration[1], 0.0]),
             dynamic=self.dynamic, coasting=self.coasting, age=stamp - self.born,
@@ -298,7 +307,7 @@ class Tracker:
                     if b[0] >= 0 and b[1] >= 0 and b[2] <= W - 1 and b[3] <= H - 1:
                         win = depth_m[int(b[1]):int(b[3]) + 1:2, int(b[0]):int(b[2]) + 1:2]
                         win = win[win > 0]
-                        front = pc[2] - 0.5 * max(tr.size[0], tr.size[1]) - 0.3
+                        front = pc[2] - tr.half_width - 0.3
                         hidden = win.size > 0 and np.mean(win < front) >= lc.unseen_occluder_fraction
                         if not hidden and not np.any(iou_one(b, boxes) >= lc.unseen_iou):
                             dropped += 1
