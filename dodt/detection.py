@@ -13,6 +13,7 @@ class Detection:
     source: str  # udepth | dbscan | ensemble | learned
     points: np.ndarray = field(default_factory=lambda: np.empty((0, 3), np.float32))  # (M, 3) world
     is_person: bool = False  # set by a learned detector that recognises people
+    cut: bool = False  # its box crosses the image's left or right edge (set by the pipeline)
 
     @property
     def lower(self) -> np.ndarray:

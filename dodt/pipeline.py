@@ -26,7 +26,7 @@ from dodt.dbscan import DBSCANDetector
 from dodt.detection import Detection
 from dodt.ensemble import ensemble
 from dodt.frames import SensorFrame
-from dodt.geometry import complete_hidden_depth, points_in_box
+from dodt.geometry import box_cut_by_view_side, complete_hidden_depth, points_in_box
 from dodt.pointcloud import VoxelCloud
 from dodt.result import PerceptionResult
 from dodt.tracker import Tracker
@@ -65,6 +65,12 @@ def validate_frame(frame: SensorFrame) -> None:
             raise ValueError(f"T_world_camera's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
         if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-3):
             raise ValueError("T_world_camera's rotation is not orthonormal")
+
+
+def mark_cut(dets: list[Detection], K, T_world_camera: np.ndarray) -> None:
+    """Set each detection's ``cut``: its box crosses the image's left or right edge."""
+    for d in dets:
+        d.cut = box_cut_by_view_side(d.center, d.size, K, T_world_camera)
 
 
 class DODT:
@@ -126,6 +132,8 @@ class DODT:
         for d in dets:
             if len(d.points) == 0 and len(points):
                 d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
+        if self.learned_detector is not None and not self.cfg.learned.cut_boxes_vote:
+            mark_cut(dets, frame.intrinsics, T)
         t5 = time.perf_counter()
         timings.update(udepth=(t1 - t0) * 1e3, dbscan=(t2 - t1) * 1e3, ensemble=(t3 - t2 + t5 - t4) * 1e3,
                        learned=(t4 - t3) * 1e3 if self.learned_detector is not None else 0.0)

@@ -69,7 +69,9 @@ class Track:
         # A person box from the learned detector makes the track a person (dynamic at once) only
         # when it recurs: person_min of the last person_window matched detections (ours; a
         # single false box would otherwise label a static obstacle dynamic for good).
-        self.person_votes: deque[bool] = deque([det.is_person], maxlen=cfg.learned.person_window)
+        # A person box cut by the view's side casts no vote (learned.cut_boxes_vote).
+        self.person_votes: deque[bool] = deque(maxlen=cfg.learned.person_window)
+        self._vote_person(det)
         self.coasting = False
         self.missed = 0  # consecutive frames without a detection
         self.headings: deque[tuple[float, float]] = deque()  # (stamp, heading of the pseudo-measured velocity)
@@ -133,6 +135,12 @@ class Track:
         c, s_ = math.cos(ang), math.sin(ang)
         return np.array([c * v[0] - s_ * v[1], s_ * v[0] + c * v[1]])
 
+    def _vote_person(self, det: Detection) -> None:
+        """Count whether the detection is a person box, unless it is cut by the view's side
+        (learned.cut_boxes_vote)."""
+        if self.cfg.learned.cut_boxes_vote or not det.cut:
+            self.person_votes.append(det.is_person)
+
     def update(self, det: Detection, seq: int, stamp: float) -> None:
         k = self.cfg.kalman
         obs = list(self.observations)
@@ -168,7 +176,7 @@ class Track:
         self.clouds.append((seq, stamp, det.points))
         self.last_seen = stamp
         self.missed = 0
-        self.person_votes.append(det.is_person)
+        self._vote_person(det)
         self.coasting = False
 
     def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float) -> None:

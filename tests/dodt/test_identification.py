@@ -215,3 +215,58 @@ def test_a_person_label_does_not_lock_a_standing_obstacle_dynamic():
     assert not any(labels[:2]) and all(labels[2:15])  # the last 3 boxes were person boxes: dynamic
     assert not any(labels[15:])  # one of the last 3 was not
     assert not track.geometric_dynamic
+
+
+def test_a_box_cut_by_the_view_side_is_told_from_one_in_view():
+    """A person-sized box 3 m ahead is in view at the image's centre, cut when it straddles the
+    left or right edge of the 87-degree view, and cut when it reaches behind the camera."""
+    from dodt.geometry import box_cut_by_view_side
+
+    size = np.array([0.5, 0.5, 1.7])
+    half_fov = np.arctan2(K.cx, K.fx)  # the left edge's bearing (x right in the image is -y in the world)
+    edge_y = 3.0 * np.tan(half_fov)
+    assert not box_cut_by_view_side(np.array([3.0, 0.0, 1.2]), size, K, T_CAM)
+    assert box_cut_by_view_side(np.array([3.0, edge_y, 1.2]), size, K, T_CAM)
+    assert box_cut_by_view_side(np.array([3.0, -edge_y, 1.2]), size, K, T_CAM)
+    assert not box_cut_by_view_side(np.array([3.0, edge_y - 0.6, 1.2]), size, K, T_CAM)
+    assert box_cut_by_view_side(np.array([0.1, 0.0, 1.2]), size, K, T_CAM)
+
+
+@pytest.mark.parametrize("cut_boxes_vote", [False, True])
+def test_person_boxes_cut_by_the_view_side_cast_no_vote(cut_boxes_vote):
+    """A track whose person boxes are cut by the view's side (a person walking into view) is no
+    person until 3 boxes in full view have come; one already a person keeps its label while its
+    boxes are cut (walking out of view), a cut box that is no person box taking no vote away
+    either. With learned.cut_boxes_vote every box votes, as before."""
+    from dataclasses import replace
+
+    from dodt.config import DODTConfig
+    from dodt.detection import Detection
+    from dodt.tracker import Track
+
+    cfg = DODTConfig()
+    cfg = replace(cfg, learned=replace(cfg.learned, cut_boxes_vote=cut_boxes_vote))
+    dt = 1 / 30
+
+    def run(cut_pattern, person_pattern):
+        track, labels = None, []
+        for k, (cut, person) in enumerate(zip(cut_pattern, person_pattern)):
+            pts = slab(3.0, 0.0, n=200, seed=k)
+            det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="learned", points=pts)
+            det.is_person, det.cut = person, cut
+            if track is None:
+                track = Track(1, det, k, k * dt, cfg)
+            else:
+                track.kf.predict(dt)
+                track.update(det, k, k * dt)
+            labels.append(track.is_person)
+        return labels
+
+    entering = run([True] * 5 + [False] * 5, [True] * 10)
+    leaving = run([False] * 4 + [True] * 6, [True] * 5 + [False] * 5)
+    if cut_boxes_vote:
+        assert entering == [False, False] + [True] * 8
+        assert leaving == [False, False, True, True, True] + [False] * 5  # lost at the first non-person box
+    else:
+        assert entering == [False] * 7 + [True] * 3  # labelled at the third box in full view
+        assert leaving == [False, False] + [True] * 8
