@@ -11,6 +11,7 @@ import os
 import sys
 from pathlib import Path
 
+from dodt.config import LearnedConfig
 from dodt.learned.model import ModelError
 from sim.scenario import ScenarioError, load_scenario, shipped_scenarios
 
@@ -340,8 +341,10 @@ def _cmd_eval_detector(args) -> int:
     except ValueError as e:
         raise UserError(f"--views: {e}") from None
     data = _detector_data(args, splits=("val",))  # evaluation needs no training images
+    if not args.soft_nms >= 0:
+        raise UserError(f"--soft-nms: expected a sigma of 0 (off) or more, got {args.soft_nms}")
     r = average_precision(model, data / "val.npz", max_distance=args.max_distance, nms_iou=args.nms_iou,
-                          min_visible_px=args.min_visible_px, views=views)
+                          min_visible_px=args.min_visible_px, views=views, soft_sigma=args.soft_nms)
     keys = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()
                      if not isinstance(v, dict))
     print(f"{model.name} on {data / 'val.npz'}: {keys}")
@@ -497,6 +500,9 @@ def build_parser() -> argparse.ArgumentParser:
             d.add_argument("--model", default=None, help="an ONNX model with its .json (default: the shipped one)")
             d.add_argument("--max-distance", type=float, default=10.0, help="people within this distance count")
             d.add_argument("--nms-iou", type=float, default=0.45, help="non-maximum suppression IoU (FastestDet's 0.45)")
+            d.add_argument("--soft-nms", type=float, default=LearnedConfig().soft_nms_sigma, metavar="SIGMA",
+                           help="Gaussian soft-NMS with this sigma, as at run time (default %(default)s); "
+                                "0: NMS at --nms-iou")
             d.add_argument("--min-visible-px", type=int, default=0,
                            help="ignore people showing fewer pixels at 640x480 (the perception metrics use 400)")
             d.add_argument("--views", default="full",

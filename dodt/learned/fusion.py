@@ -84,7 +84,7 @@ class YoloMAD:
 
         self.cfg = cfg
         self.detector = detector or PersonDetector2D(cfg.model or None, cfg.score_threshold, cfg.nms_iou, cfg.threads,
-                                                     views=cfg.views)
+                                                     views=cfg.views, soft_sigma=cfg.soft_nms_sigma)
         self.frames_without_color = 0
         self._keep(np.zeros((0, 4), np.float32), np.zeros(0, np.float32), [], 0.0, 0.0)
 

@@ -72,3 +72,28 @@ def nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> np.ndarr
         rest = order[1:]
         order = rest[iou_one(boxes[i], boxes[rest]) <= iou_threshold]
     return np.asarray(keep, dtype=np.int64)
+
+
+def soft_nms(boxes: np.ndarray, scores: np.ndarray, sigma: float, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian soft non-maximum suppression (Bodla et al., 2017): the best box is kept and every
+    other box's score is multiplied by exp(-IoU^2 / sigma) with it, again with the best of the
+    rest, and so on; boxes whose score falls below ``floor`` are dropped. A person partly hidden
+    behind another keeps his box with a lowered score instead of losing it to a fixed IoU cut.
+    Returns the kept boxes (K, 4) and their lowered scores, best first."""
+    b = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
+    s = np.asarray(scores, dtype=np.float64).reshape(-1).copy()
+    alive = s >= floor
+    b, s = b[alive], s[alive]
+    kept_b, kept_s = [], []
+    while len(s):
+        i = int(np.argmax(s))
+        kept_b.append(b[i])
+        kept_s.append(s[i])
+        rest = np.ones(len(s), bool)
+        rest[i] = False
+        b, s = b[rest], s[rest]
+        if len(s):
+            s = s * np.exp(-iou_one(kept_b[-1], b) ** 2 / sigma)
+            alive = s >= floor
+            b, s = b[alive], s[alive]
+    return np.asarray(kept_b, np.float32).reshape(-1, 4), np.asarray(kept_s, np.float32)

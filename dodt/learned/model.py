@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dodt.config import LearnedConfig
 from dodt.learned import layout
 from dodt.learned.views import detect, parse_views
 
@@ -71,7 +72,7 @@ class PersonDetector2D:
     """People in a color image: boxes (K, 4) as (x1, y1, x2, y2) pixels of that image, and scores."""
 
     def __init__(self, model_path: str | Path | None = None, score_threshold: float | None = None,
-                 nms_iou: float = 0.45, threads: int = 1, views=("full",)):
+                 nms_iou: float = 0.45, threads: int = 1, views=("full",), soft_sigma: float | None = None):
         try:
             self.views = parse_views(views)
         except ValueError as e:
@@ -90,6 +91,8 @@ class PersonDetector2D:
         rec_thr = self.record.get("score_threshold", 0.5)
         self.score_threshold = float(rec_thr if score_threshold is None else score_threshold)
         self.nms_iou = float(nms_iou)
+        # soft-NMS sigma (0: NMS at nms_iou); None: the run time's (LearnedConfig.soft_nms_sigma)
+        self.soft_sigma = float(LearnedConfig().soft_nms_sigma if soft_sigma is None else soft_sigma)
 
     def raw(self, color: np.ndarray) -> np.ndarray:
         """The network's (5, GRID_H, GRID_W) output for one RGB uint8 image."""
@@ -101,6 +104,6 @@ class PersonDetector2D:
 
     def __call__(self, color: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         boxes, scores = detect(self._run, color, self.views, self.score_threshold, self.nms_iou,
-                               floor=self.score_threshold)
+                               floor=self.score_threshold, soft_sigma=self.soft_sigma)
         h, w = color.shape[:2]
         return boxes * np.array([w, h, w, h], np.float32), scores

@@ -154,20 +154,30 @@ def fuse(per_view: Sequence[tuple[np.ndarray, np.ndarray]], views: Sequence[View
     return out_boxes[order].astype(np.float32), out_scores[order].astype(np.float32)
 
 
-def detect(run: Callable[[np.ndarray], np.ndarray], color: np.ndarray, views: Sequence[View],
-           score_threshold: float, iou: float, floor: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
-    """People in ``color``: boxes (K, 4) as fractions of the image and scores, after fusion and
-    non-maximum suppression at ``iou``, at least ``score_threshold``. ``run`` maps a network
-    input image to the raw (5, GRID_H, GRID_W) output. One whole, unmirrored view is the plain
-    decode and NMS; several views' boxes from ``floor`` up are fused first."""
-    views = tuple(views)
-    if len(views) == 1 and views[0].is_whole and not views[0].mirrored:
-        boxes, scores = layout.decode(run(view_image(color, views[0])), score_threshold)
-        keep = layout.nms(boxes, scores, iou)
-        return boxes[keep], scores[keep]
-    per_view = [to_image(*layout.decode(run(view_image(color, v)), floor), v) for v in views]
-    boxes, scores = fuse(per_view, views, iou)
+def suppress(boxes: np.ndarray, scores: np.ndarray, iou: float, soft_sigma: float,
+             score_threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """Non-maximum suppression at ``iou``, or soft-NMS with ``soft_sigma`` when it is above 0, then
+    the boxes scoring at least ``score_threshold``."""
+    if soft_sigma > 0:
+        return layout.soft_nms(boxes, scores, soft_sigma, score_threshold)
     keep = layout.nms(boxes, scores, iou)
     boxes, scores = boxes[keep], scores[keep]
     good = scores >= score_threshold
     return boxes[good], scores[good]
+
+
+def detect(run: Callable[[np.ndarray], np.ndarray], color: np.ndarray, views: Sequence[View],
+           score_threshold: float, iou: float, floor: float = 0.05,
+           soft_sigma: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """People in ``color``: boxes (K, 4) as fractions of the image and scores, after fusion and
+    non-maximum suppression at ``iou`` (soft-NMS with ``soft_sigma`` when it is above 0), at least
+    ``score_threshold``. ``run`` maps a network input image to the raw (5, GRID_H, GRID_W) output.
+    One whole, unmirrored view is the plain decode and suppression; several views' boxes from
+    ``floor`` up are fused first."""
+    views = tuple(views)
+    if len(views) == 1 and views[0].is_whole and not views[0].mirrored:
+        boxes, scores = layout.decode(run(view_image(color, views[0])), score_threshold)
+        return suppress(boxes, scores, iou, soft_sigma, score_threshold)
+    per_view = [to_image(*layout.decode(run(view_image(color, v)), floor), v) for v in views]
+    boxes, scores = fuse(per_view, views, iou)
+    return suppress(boxes, scores, iou, soft_sigma, score_threshold)

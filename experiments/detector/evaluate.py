@@ -242,12 +242,13 @@ def run_onnx(session, images: np.ndarray) -> np.ndarray:
 
 
 def detect_all(session, images: np.ndarray, views, score_threshold: float,
-               nms_iou: float = NMS_IOU) -> list[tuple[np.ndarray, np.ndarray]]:
+               nms_iou: float = NMS_IOU, soft_sigma: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
     """The run time's detections (`dodt.learned.views.detect`) of each image through ``views``."""
     def run(x: np.ndarray) -> np.ndarray:
         return session.run(["preds"], {"images": layout.to_tensor(x)})[0][0]
 
-    return [view_fusion.detect(run, img, views, score_threshold, nms_iou, floor=score_threshold) for img in images]
+    return [view_fusion.detect(run, img, views, score_threshold, nms_iou, floor=score_threshold,
+                               soft_sigma=soft_sigma) for img in images]
 
 
 def recommended_threshold(model_path) -> float | None:
@@ -261,10 +262,10 @@ def recommended_threshold(model_path) -> float | None:
 def average_precision(model_path, npz_path, max_distance: float = 10.0, iou: float = 0.5,
                       score_threshold: float = 0.05, operating_threshold: float | None = None,
                       threads: int = 2, nms_iou: float = NMS_IOU, min_visible_px: int = 0,
-                      views=("full",)) -> dict:
+                      views=("full",), soft_sigma: float = 0.0) -> dict:
     """AP@``iou`` (VOC all-point) of the ONNX model on a dataset file, for the people within
     ``max_distance``; detections below ``score_threshold`` are dropped before NMS (IoU ``nms_iou``,
-    FastestDet's 0.45 by default).
+    FastestDet's 0.45 by default), or soft-NMS with ``soft_sigma`` when it is above 0.
 
     Precision, recall and recall per distance bin (0-2, 2-4, 4-6, 6-8, 8-10 m) are given at
     ``operating_threshold``: by default the one recommended in the model's json (its
@@ -285,9 +286,11 @@ def average_precision(model_path, npz_path, max_distance: float = 10.0, iou: flo
     view_list = tuple(v if isinstance(v, view_fusion.View) else view_fusion.parse_views([v])[0] for v in views)
     data = load_split(npz_path)
     # one full view is the plain decode and NMS (decode_all's), several are fused as at run time
-    detections = detect_all(onnx_session(model_path, threads), data["images"], view_list, score_threshold, nms_iou)
+    detections = detect_all(onnx_session(model_path, threads), data["images"], view_list, score_threshold, nms_iou,
+                            soft_sigma)
     out = evaluate_detections(detections, data["boxes"], max_distance, iou, operating_threshold, min_visible_px)
     out["score_threshold"] = float(score_threshold)
     out["nms_iou"] = float(nms_iou)
+    out["soft_nms_sigma"] = float(soft_sigma)
     out["views"] = [name for v in view_list for name, known in view_fusion.VIEWS.items() if known == v]
     return out

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dodt.config import LearnedConfig
 from dodt.learned import layout
 from dodt.learned.model import sha256_of
 from experiments.detector import evaluate
@@ -394,10 +395,12 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
     # The operating point: the best-F1 threshold on validation, then the figures through onnxruntime.
     v_torch = validate(final, val_data)
     threshold = v_torch["best_f1_threshold"]
+    # through the run time's suppression (soft-NMS, LearnedConfig.soft_nms_sigma)
+    soft = LearnedConfig().soft_nms_sigma
     figures = evaluate.average_precision(onnx_path, data_dir / "val.npz", operating_threshold=threshold,
-                                         threads=threads)
+                                         threads=threads, soft_sigma=soft)
     figures_15 = evaluate.average_precision(onnx_path, data_dir / "val.npz", max_distance=15.0,
-                                            operating_threshold=threshold, threads=threads)
+                                            operating_threshold=threshold, threads=threads, soft_sigma=soft)
     if command is None:
         command = f"dodt-nav train-detector --data {data_dir} --epochs {int(epochs)} --seed {int(seed)}"
         if threads != 2:
@@ -417,6 +420,7 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
                    "decode": "dodt.learned.layout.decode"},
         "score_threshold": threshold,
         "nms_iou": NMS_IOU,
+        "soft_nms_sigma": soft,
         "command": command,
         "seed": int(seed),
         "epochs": int(epochs),

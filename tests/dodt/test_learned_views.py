@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from dodt.learned import layout
-from dodt.learned.views import VIEWS, View, detect, fuse, parse_views, to_image, view_image
+from dodt.learned.views import VIEWS, View, detect, fuse, parse_views, suppress, to_image, view_image
 
 
 def test_views_by_name_and_bad_names():
@@ -59,3 +59,25 @@ def test_one_full_view_is_the_plain_decode_and_nms():
     keep = layout.nms(b, s, 0.45)
     assert np.array_equal(got_b, b[keep]) and np.array_equal(got_s, s[keep])
     assert isinstance(VIEWS["full"], View) and VIEWS["full"].is_whole
+
+
+def test_soft_nms_lowers_overlapping_scores_instead_of_dropping_the_boxes():
+    """Two people whose boxes overlap by an IoU of 0.6 (one partly behind the other): NMS at 0.45
+    keeps one; soft-NMS keeps both, the second scored 0.9 x exp(-0.6^2 / sigma), a box apart
+    keeps its score, and a near-duplicate (IoU 0.9) falls under the floor (0.3) and is dropped."""
+    boxes = np.array([[0.10, 0.1, 0.30, 0.9],   # score 0.95
+                      [0.15, 0.1, 0.35, 0.9],   # IoU 0.6 with the first
+                      [0.60, 0.1, 0.80, 0.9],   # apart
+                      [0.11, 0.1, 0.31, 0.9]],  # a near-duplicate of the first
+                     np.float32)
+    scores = np.array([0.95, 0.9, 0.7, 0.8], np.float32)
+    iou = layout.iou_one(boxes[0], boxes)
+    assert iou[1] == pytest.approx(0.6, abs=1e-5) and iou[3] > 0.9
+    assert list(layout.nms(boxes, scores, 0.45)) == [0, 2]
+    kept_b, kept_s = layout.soft_nms(boxes, scores, sigma=0.5, floor=0.3)
+    assert np.array_equal(kept_b, boxes[[0, 2, 1]])
+    assert kept_s == pytest.approx([0.95, 0.7, 0.9 * np.exp(-0.36 / 0.5)], rel=1e-5)
+    # the same through the run-time detection path, and NMS there without a sigma
+    assert np.array_equal(suppress(boxes, scores, 0.45, 0.5, 0.3)[0], kept_b)
+    assert np.array_equal(suppress(boxes, scores, 0.45, 0.0, 0.3)[0], boxes[[0, 2]])
+    assert np.array_equal(suppress(boxes, scores, 0.45, 0.5, 0.5)[0], boxes[[0, 2]])  # 0.44 < 0.5
