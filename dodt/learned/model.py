@@ -93,6 +93,8 @@ class PersonDetector2D:
         self.nms_iou = float(nms_iou)
         # soft-NMS sigma (0: NMS at nms_iou); None: the run time's (LearnedConfig.soft_nms_sigma)
         self.soft_sigma = float(LearnedConfig().soft_nms_sigma if soft_sigma is None else soft_sigma)
+        if not self.soft_sigma >= 0:
+            raise ModelError(f"learned detector: soft_nms_sigma must be 0 (NMS) or more, got {soft_sigma}")
 
     def raw(self, color: np.ndarray) -> np.ndarray:
         """The network's (5, GRID_H, GRID_W) output for one RGB uint8 image."""

@@ -81,3 +81,10 @@ def test_soft_nms_lowers_overlapping_scores_instead_of_dropping_the_boxes():
     assert np.array_equal(suppress(boxes, scores, 0.45, 0.5, 0.3)[0], kept_b)
     assert np.array_equal(suppress(boxes, scores, 0.45, 0.0, 0.3)[0], boxes[[0, 2]])
     assert np.array_equal(suppress(boxes, scores, 0.45, 0.5, 0.5)[0], boxes[[0, 2]])  # 0.44 < 0.5
+
+
+def test_a_negative_soft_nms_sigma_is_refused_by_name():
+    from dodt.learned.model import ModelError, PersonDetector2D
+
+    with pytest.raises(ModelError, match="soft_nms_sigma"):
+        PersonDetector2D(soft_sigma=-0.5)
