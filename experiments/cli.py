@@ -343,8 +343,11 @@ def _cmd_eval_detector(args) -> int:
     data = _detector_data(args, splits=("val",))  # evaluation needs no training images
     if not args.soft_nms >= 0:
         raise UserError(f"--soft-nms: expected a sigma of 0 (off) or more, got {args.soft_nms}")
+    if not 0 < args.score_floor < 1:
+        raise UserError(f"--score-floor: expected a score between 0 and 1, got {args.score_floor}")
     r = average_precision(model, data / "val.npz", max_distance=args.max_distance, nms_iou=args.nms_iou,
-                          min_visible_px=args.min_visible_px, views=views, soft_sigma=args.soft_nms)
+                          min_visible_px=args.min_visible_px, views=views, soft_sigma=args.soft_nms,
+                          score_threshold=args.score_floor)
     keys = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()
                      if not isinstance(v, dict))
     print(f"{model.name} on {data / 'val.npz'}: {keys}")
@@ -500,6 +503,9 @@ def build_parser() -> argparse.ArgumentParser:
             d.add_argument("--model", default=None, help="an ONNX model with its .json (default: the shipped one)")
             d.add_argument("--max-distance", type=float, default=10.0, help="people within this distance count")
             d.add_argument("--nms-iou", type=float, default=0.45, help="non-maximum suppression IoU (FastestDet's 0.45)")
+            d.add_argument("--score-floor", type=float, default=0.05,
+                           help="detections scoring less are left out of the AP (default %(default)s; "
+                                "YOLO evaluations use 0.001, which counts more of the curve's tail)")
             d.add_argument("--soft-nms", type=float, default=LearnedConfig().soft_nms_sigma, metavar="SIGMA",
                            help="Gaussian soft-NMS with this sigma, as at run time (default %(default)s); "
                                 "0: NMS at --nms-iou")

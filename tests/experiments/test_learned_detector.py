@@ -189,6 +189,14 @@ def test_eval_detector_renders_only_the_missing_validation_split_and_refuses_oth
     assert "val.npz was rendered from other seeds" in capsys.readouterr().err
     assert main(["eval-detector", "--val-seeds", "1000:1001", "--train-seeds", "0:1001", *opts]) == 2
     assert "overlap: 1000" in capsys.readouterr().err
+    # the suppression and the score floor are reported, and bad values refused by name
+    assert main(["eval-detector", "--val-seeds", "1000:1001", "--soft-nms", "0", "--score-floor", "0.001", *opts]) == 0
+    out = capsys.readouterr().out
+    assert "soft_nms_sigma 0.000" in out and "score_threshold 0.001" in out
+    assert main(["eval-detector", "--val-seeds", "1000:1001", "--score-floor", "0", *opts]) == 2
+    assert "--score-floor" in capsys.readouterr().err
+    assert main(["eval-detector", "--val-seeds", "1000:1001", "--soft-nms", "-1", *opts]) == 2
+    assert "--soft-nms" in capsys.readouterr().err
 
 
 def test_train_detector_refuses_a_training_split_rendered_from_other_seeds(tmp_path, capsys):
