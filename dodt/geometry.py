@@ -49,12 +49,11 @@ def in_field_of_view(points_world: np.ndarray, T_world_camera: np.ndarray, K: Ca
     return ok & (u >= margin_px) & (u <= K.width - 1 - margin_px) & (v >= margin_px) & (v <= K.height - 1 - margin_px)
 
 
-def box_cut_by_view_side(center: np.ndarray, size: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray,
-                         margin_px: float = 0.0) -> bool:
-    """Whether a world box seen from the camera crosses the image's left or right edge (within
-    ``margin_px``), or reaches behind the camera: only part of it can be in view. (Its corners
-    nearer than a box lifted from a 2D box at its median depth project wider than the 2D box, so a
-    2D box touching the edge gives a cut 3D box.)"""
+def box_cut_by_view_side(center: np.ndarray, size: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> bool:
+    """Whether a world box seen from the camera crosses the image's left or right edge, or reaches
+    behind the camera: only part of it can be in view. (The corners of a box lifted from a 2D box
+    that lie nearer than its median depth project wider than the 2D box, so a 2D box touching the
+    edge gives a cut 3D box.)"""
     lo, hi = box_bounds(center, size)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
@@ -62,7 +61,7 @@ def box_cut_by_view_side(center: np.ndarray, size: np.ndarray, K: CameraIntrinsi
     if np.any(pc[:, 2] <= 1e-6):
         return True
     u = K.fx * pc[:, 0] / pc[:, 2] + K.cx
-    return bool(u.min() < margin_px or u.max() > K.width - 1 - margin_px)
+    return bool(u.min() < 0.0 or u.max() > K.width - 1)
 
 
 def points_in_box(points: np.ndarray, center: np.ndarray, size: np.ndarray, grow: float = 0.0) -> np.ndarray:

@@ -77,6 +77,10 @@ class PersonDetector2D:
             self.views = parse_views(views)
         except ValueError as e:
             raise ModelError(f"learned detector: {e}") from None
+        # soft-NMS sigma (0: NMS at nms_iou); None: the run time's (LearnedConfig.soft_nms_sigma)
+        self.soft_sigma = float(LearnedConfig().soft_nms_sigma if soft_sigma is None else soft_sigma)
+        if not self.soft_sigma >= 0:
+            raise ModelError(f"learned detector: soft_nms_sigma must be 0 (NMS) or more, got {soft_sigma}")
         self.model_path = Path(model_path) if model_path else SHIPPED_MODEL
         self.record = load_record(self.model_path)
         self.session = open_session(self.model_path, threads)
@@ -91,10 +95,6 @@ class PersonDetector2D:
         rec_thr = self.record.get("score_threshold", 0.5)
         self.score_threshold = float(rec_thr if score_threshold is None else score_threshold)
         self.nms_iou = float(nms_iou)
-        # soft-NMS sigma (0: NMS at nms_iou); None: the run time's (LearnedConfig.soft_nms_sigma)
-        self.soft_sigma = float(LearnedConfig().soft_nms_sigma if soft_sigma is None else soft_sigma)
-        if not self.soft_sigma >= 0:
-            raise ModelError(f"learned detector: soft_nms_sigma must be 0 (NMS) or more, got {soft_sigma}")
 
     def raw(self, color: np.ndarray) -> np.ndarray:
         """The network's (5, GRID_H, GRID_W) output for one RGB uint8 image."""
