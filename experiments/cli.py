@@ -493,7 +493,7 @@ def build_parser() -> argparse.ArgumentParser:
             d.add_argument("--seed", type=int, default=0, help="training seed (weights, data order, augmentation)")
             d.add_argument("--threads", type=int, default=2, help="PyTorch threads (the result depends on it)")
             d.add_argument("--device", default="cpu", help="cpu, or a CUDA device (cuda, cuda:1)")
-            d.add_argument("--arch", default="base", help="network size: base (shipped shape) or wide")
+            d.add_argument("--arch", default="base", help="network size: base (FastestDet's shape), wide, or wide8 (wide with a stride-8 head)")
             d.add_argument("--batch-size", type=int, default=32)
             d.add_argument("--lr", type=float, default=3e-3, help="AdamW's peak learning rate")
             d.add_argument("--warmup-epochs", type=float, default=1.0, help="linear warm-up before the cosine decay")

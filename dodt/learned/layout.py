@@ -2,10 +2,11 @@
 
 Input: the color image (RGB uint8, any size) resized to INPUT_W x INPUT_H with bilinear
 interpolation (each axis scaled on its own), scaled to [0, 1], NCHW float32, ONNX input "images".
-Output "preds": (1, 5, GRID_H, GRID_W) raw values per cell of a stride-16 grid (one anchor-free
-head, one class): channel 0 the objectness logit, channels 1-4 (tx, ty, tw, th) decoded as in
-FastestDet: cx = (gx + tanh(tx)) / GRID_W, cy = (gy + tanh(ty)) / GRID_H, w = sigmoid(tw),
-h = sigmoid(th), all as fractions of the image's width and height.
+Output "preds": (1, 5, GH, GW) raw values per cell of a stride-16 grid (GRID_H x GRID_W, as
+FastestDet) or a stride-8 grid (twice as fine each way); one anchor-free head, one class: channel
+0 the objectness logit, channels 1-4 (tx, ty, tw, th) decoded as in FastestDet:
+cx = (gx + tanh(tx)) / GW, cy = (gy + tanh(ty)) / GH, w = sigmoid(tw), h = sigmoid(th), all as
+fractions of the image's width and height. The grid is read from the output's shape.
 """
 from __future__ import annotations
 
@@ -15,7 +16,13 @@ import numpy as np
 INPUT_W, INPUT_H = 352, 256
 STRIDE = 16
 GRID_W, GRID_H = INPUT_W // STRIDE, INPUT_H // STRIDE
+STRIDES = (16, 8)  # the head strides a model may have
 CHANNELS = 5  # objectness, tx, ty, tw, th
+
+
+def output_shape(stride: int) -> tuple[int, int, int, int]:
+    """The (1, CHANNELS, GH, GW) output of a model whose head has ``stride``."""
+    return (1, CHANNELS, INPUT_H // stride, INPUT_W // stride)
 
 
 def resize_for_network(color: np.ndarray) -> np.ndarray:
@@ -35,15 +42,19 @@ def to_tensor(images: np.ndarray) -> np.ndarray:
 
 def decode(preds: np.ndarray, score_threshold: float) -> tuple[np.ndarray, np.ndarray]:
     """Boxes (K, 4) as (x1, y1, x2, y2) fractions of the image, and scores (K,), from one image's
-    raw (5, GRID_H, GRID_W) output, before non-maximum suppression."""
-    p = np.asarray(preds, dtype=np.float32).reshape(CHANNELS, GRID_H, GRID_W)
+    raw (5, GH, GW) output, before non-maximum suppression."""
+    p = np.asarray(preds, dtype=np.float32)
+    p = p.reshape(p.shape[-3:])
+    if p.shape[0] != CHANNELS:
+        raise ValueError(f"decode: expected ({CHANNELS}, GH, GW) raw output, got shape {np.shape(preds)}")
+    grid_h, grid_w = p.shape[1:]
     score = 1.0 / (1.0 + np.exp(-p[0]))
     gy, gx = np.nonzero(score >= score_threshold)
     if len(gx) == 0:
         return np.zeros((0, 4), np.float32), np.zeros(0, np.float32)
     t = p[1:, gy, gx]
-    cx = (gx + np.tanh(t[0])) / GRID_W
-    cy = (gy + np.tanh(t[1])) / GRID_H
+    cx = (gx + np.tanh(t[0])) / grid_w
+    cy = (gy + np.tanh(t[1])) / grid_h
     w = 1.0 / (1.0 + np.exp(-t[2]))
     h = 1.0 / (1.0 + np.exp(-t[3]))
     boxes = np.stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], axis=1).clip(0.0, 1.0)

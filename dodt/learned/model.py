@@ -86,18 +86,19 @@ class PersonDetector2D:
         self.session = open_session(self.model_path, threads)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         want_in = [1, 3, layout.INPUT_H, layout.INPUT_W]
-        want_out = [1, layout.CHANNELS, layout.GRID_H, layout.GRID_W]
+        want_out = [list(layout.output_shape(s)) for s in layout.STRIDES]
         if len(inputs) != 1 or list(inputs[0].shape) != want_in:
             raise ModelError(f"{self.model_path}: input {[(i.name, i.shape) for i in inputs]} is not {want_in}")
-        if len(outputs) != 1 or list(outputs[0].shape) != want_out:
-            raise ModelError(f"{self.model_path}: output {[(o.name, o.shape) for o in outputs]} is not {want_out}")
+        if len(outputs) != 1 or list(outputs[0].shape) not in want_out:
+            raise ModelError(f"{self.model_path}: output {[(o.name, o.shape) for o in outputs]} is not one of "
+                             f"{want_out} (strides {', '.join(map(str, layout.STRIDES))})")
         self._input = inputs[0].name
         rec_thr = self.record.get("score_threshold", 0.5)
         self.score_threshold = float(rec_thr if score_threshold is None else score_threshold)
         self.nms_iou = float(nms_iou)
 
     def raw(self, color: np.ndarray) -> np.ndarray:
-        """The network's (5, GRID_H, GRID_W) output for one RGB uint8 image."""
+        """The network's (5, GH, GW) output for one RGB uint8 image."""
         return self._run(layout.resize_for_network(color))
 
     def _run(self, x: np.ndarray) -> np.ndarray:

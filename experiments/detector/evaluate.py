@@ -232,9 +232,9 @@ def onnx_session(model_path, threads: int = 2):
 
 
 def run_onnx(session, images: np.ndarray) -> np.ndarray:
-    """Raw outputs (N, 5, GRID_H, GRID_W) for uint8 images at the network size, one at a time
-    (the model's input shape is fixed at batch 1)."""
-    out = np.empty((len(images), layout.CHANNELS, layout.GRID_H, layout.GRID_W), np.float32)
+    """Raw outputs (N, 5, GH, GW) for uint8 images at the network size, one at a time (the model's
+    input shape is fixed at batch 1; the grid is the model's output's)."""
+    out = np.empty((len(images), *session.get_outputs()[0].shape[1:]), np.float32)
     for i, img in enumerate(images):
         x = layout.to_tensor(layout.resize_for_network(img))
         out[i] = session.run(["preds"], {"images": x})[0][0]

@@ -11,6 +11,10 @@ Shape of the network (FastestDet's, reference notes section 13, with fewer backb
 - Head: one anchor-free head at stride 16: a 1x1 conv, then two branches (5x5 depthwise + 1x1):
   objectness (1 channel, a logit) and box regression (4 channels: tx, ty, tw, th). One class, so
   no class branch. Output (N, 5, H/16, W/16) in `dodt.learned.layout`'s channel order.
+- Stride-8 sizes (ours, not FastestDet's): the neck's output is upsampled x2 (nearest) and added
+  to P1 brought to the neck's width by a 1x1 conv (a top-down step as in a feature pyramid), a
+  5x5 depthwise conv mixes them, and the same head runs on that stride-8 grid: people walking
+  close together, or small and far, each get a cell of their own. Output (N, 5, H/8, W/8).
 """
 from __future__ import annotations
 
@@ -23,9 +27,11 @@ STAGE_CHANNELS = (24, 48, 96, 192)  # stem, stride 8, stride 16, stride 32 (Fast
 NECK_CHANNELS = 96
 # Named sizes of the same network: "base" is the shape above (180,629 parameters); "wide" has
 # more channels and one more unit per stage, for training where compute is cheap (a GPU).
+# "wide8" is "wide" with its head at stride 8.
 ARCHS = {
-    "base": {"repeats": STAGE_REPEATS, "channels": STAGE_CHANNELS, "neck": NECK_CHANNELS},
-    "wide": {"repeats": (3, 7, 3), "channels": (32, 64, 128, 256), "neck": 128},
+    "base": {"repeats": STAGE_REPEATS, "channels": STAGE_CHANNELS, "neck": NECK_CHANNELS, "stride": 16},
+    "wide": {"repeats": (3, 7, 3), "channels": (32, 64, 128, 256), "neck": 128, "stride": 16},
+    "wide8": {"repeats": (3, 7, 3), "channels": (32, 64, 128, 256), "neck": 128, "stride": 8},
 }
 
 
@@ -121,13 +127,31 @@ class Head(nn.Module):
         return torch.cat([self.obj(x), self.reg(x)], dim=1)
 
 
-class PersonDetector(nn.Module):
-    """(N, 3, H, W) RGB in [0, 1] -> (N, 5, H/16, W/16) raw (objectness logit, tx, ty, tw, th)."""
+class TopDown(nn.Module):
+    """The stride-16 neck brought to stride 8: upsampled x2 and added to P1 projected to the same
+    width, then a 5x5 depthwise conv."""
 
-    def __init__(self, repeats=STAGE_REPEATS, channels=STAGE_CHANNELS, neck=NECK_CHANNELS):
+    def __init__(self, c_p1: int, c: int):
         super().__init__()
+        self.lateral = conv_bn(c_p1, c, 1, relu=False)
+        self.mix = conv_bn(c, c, 5, groups=c)
+
+    def forward(self, neck: torch.Tensor, p1: torch.Tensor) -> torch.Tensor:
+        return self.mix(F.interpolate(neck, scale_factor=2.0, mode="nearest") + self.lateral(p1))
+
+
+class PersonDetector(nn.Module):
+    """(N, 3, H, W) RGB in [0, 1] -> (N, 5, H/s, W/s) raw (objectness logit, tx, ty, tw, th), with
+    the head's stride s 16 (FastestDet's) or 8."""
+
+    def __init__(self, repeats=STAGE_REPEATS, channels=STAGE_CHANNELS, neck=NECK_CHANNELS, stride: int = 16):
+        super().__init__()
+        if stride not in (8, 16):
+            raise ValueError(f"stride: expected 8 or 16, got {stride!r}")
+        self.stride = stride
         self.backbone = Backbone(repeats, channels)
         self.spp = LightSPP(sum(channels[1:]), neck)
+        self.top_down = TopDown(channels[1], neck) if stride == 8 else None
         self.head = Head(neck)
         # Normalisation inside the graph keeps the run-time contract at plain [0, 1] RGB.
         self.register_buffer("mean", torch.tensor([0.45, 0.45, 0.45]).view(1, 3, 1, 1))
@@ -153,9 +177,12 @@ class PersonDetector(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         x = (x - self.mean) * self.inv_std
         p1, p2, p3 = self.backbone(x)
-        p1 = F.avg_pool2d(p1, 3, 2, 1)
+        pooled = F.avg_pool2d(p1, 3, 2, 1)
         p3 = F.interpolate(p3, scale_factor=2.0, mode="nearest")
-        return self.head(self.spp(torch.cat([p1, p2, p3], dim=1)))
+        neck = self.spp(torch.cat([pooled, p2, p3], dim=1))
+        if self.top_down is not None:
+            neck = self.top_down(neck, p1)
+        return self.head(neck)
 
 
 def build_model(arch: str = "base") -> PersonDetector:
@@ -163,7 +190,7 @@ def build_model(arch: str = "base") -> PersonDetector:
     if arch not in ARCHS:
         raise ValueError(f"arch: unknown {arch!r}; expected one of {', '.join(ARCHS)}")
     a = ARCHS[arch]
-    return PersonDetector(a["repeats"], a["channels"], a["neck"])
+    return PersonDetector(a["repeats"], a["channels"], a["neck"], a["stride"])
 
 
 def describe(arch: str = "base") -> str:
@@ -171,7 +198,10 @@ def describe(arch: str = "base") -> str:
     a = ARCHS[arch]
     return ("FastestDet-style: ShuffleNetV2-like backbone (repeats %s, channels %s), avg-pooled stride-8 + "
             "upsampled stride-32 + stride-16 concat, light SPP (5x5 depthwise stacks 1/2/3, residual, %d "
-            "channels), one anchor-free stride-16 head" % (list(a["repeats"]), list(a["channels"]), a["neck"]))
+            "channels), %sone anchor-free stride-%d head"
+            % (list(a["repeats"]), list(a["channels"]), a["neck"],
+               "a top-down step to stride 8 (upsampled neck + 1x1 of the stride-8 features, 5x5 depthwise), "
+               if a["stride"] == 8 else "", a["stride"]))
 
 
 def count_parameters(model: nn.Module) -> int:

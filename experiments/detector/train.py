@@ -60,10 +60,11 @@ def load_data(path) -> dict:
     return data
 
 
-def build_targets(boxes_per_image: list[np.ndarray], ignored_per_image: list[np.ndarray]):
-    """Per-cell targets: box (B, GH, GW, 4) as (x1, y1, x2, y2) fractions, positive mask and
-    ignore mask (B, GH, GW)."""
-    GH, GW = layout.GRID_H, layout.GRID_W
+def build_targets(boxes_per_image: list[np.ndarray], ignored_per_image: list[np.ndarray],
+                  grid: tuple[int, int] = (layout.GRID_H, layout.GRID_W)):
+    """Per-cell targets on a ``grid`` (GH, GW) (the head's; stride 16 by default): box
+    (B, GH, GW, 4) as (x1, y1, x2, y2) fractions, positive mask and ignore mask (B, GH, GW)."""
+    GH, GW = grid
     B = len(boxes_per_image)
     tbox = np.zeros((B, GH, GW, 4), np.float32)
     pos = np.zeros((B, GH, GW), bool)
@@ -107,11 +108,12 @@ def _torch():
     return torch
 
 
-def decode_torch(reg, gx, gy):
-    """(P, 4) raw (tx, ty, tw, th) at cells (gx, gy) -> (P, 4) boxes (x1, y1, x2, y2), fractions."""
+def decode_torch(reg, gx, gy, grid: tuple[int, int] = (layout.GRID_H, layout.GRID_W)):
+    """(P, 4) raw (tx, ty, tw, th) at cells (gx, gy) of a ``grid`` (GH, GW) -> (P, 4) boxes
+    (x1, y1, x2, y2), fractions."""
     torch = _torch()
-    cx = (gx + torch.tanh(reg[:, 0])) / layout.GRID_W
-    cy = (gy + torch.tanh(reg[:, 1])) / layout.GRID_H
+    cx = (gx + torch.tanh(reg[:, 0])) / grid[1]
+    cy = (gy + torch.tanh(reg[:, 1])) / grid[0]
     w = torch.sigmoid(reg[:, 2])
     h = torch.sigmoid(reg[:, 3])
     return torch.stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], dim=1)
@@ -147,7 +149,7 @@ def detection_loss(out, tbox, pos, ign):
     target = torch.zeros_like(obj)
     if b.numel():
         reg = out[b, 1:, gy, gx]
-        pred = decode_torch(reg, gx.to(out.dtype), gy.to(out.dtype))
+        pred = decode_torch(reg, gx.to(out.dtype), gy.to(out.dtype), tuple(out.shape[2:]))
         iou, g = giou(pred, tbox[b, gy, gx])
         reg_loss = (1.0 - g).sum() / n_pos
         target[b, gy, gx] = IOU_TARGET_FLOOR + (1 - IOU_TARGET_FLOOR) * iou.detach().clamp(0, 1)
@@ -192,7 +194,7 @@ def predict(model, images: np.ndarray, batch: int = 32) -> np.ndarray:
         for i in range(0, len(images), batch):
             x = torch.from_numpy(layout.to_tensor(images[i:i + batch])).to(dev)
             outs.append(model(x.contiguous(memory_format=torch.channels_last)).float().cpu().numpy())
-    return np.concatenate(outs) if outs else np.zeros((0, layout.CHANNELS, layout.GRID_H, layout.GRID_W), np.float32)
+    return np.concatenate(outs) if outs else np.zeros((0, *layout.output_shape(model.stride)[1:]), np.float32)
 
 
 def validate(model, data: dict, max_distance: float = 10.0) -> dict:
@@ -201,7 +203,8 @@ def validate(model, data: dict, max_distance: float = 10.0) -> dict:
 
 
 def export_onnx(model, path: Path) -> None:
-    """Fixed-shape ONNX (opset 17): input "images" (1, 3, H, W), output "preds" (1, 5, GH, GW)."""
+    """Fixed-shape ONNX (opset 17): input "images" (1, 3, H, W), output "preds" (1, 5, GH, GW), the
+    grid of the model's head stride."""
     torch = _torch()
     m = deepcopy(model).cpu().eval().to(memory_format=torch.contiguous_format)
     x = torch.zeros(1, 3, layout.INPUT_H, layout.INPUT_W)
@@ -286,9 +289,9 @@ def train(data_dir, out_dir, epochs: int, seed: int, batch_size: int = 32, threa
         torch.set_flush_denormal(False)
 
 
-def _batch(train_images, train_boxes, idx: np.ndarray, rng: np.random.Generator):
-    """One augmented batch: images (B, 3, H, W) on the images' device and the targets as tensors
-    on that device."""
+def _batch(train_images, train_boxes, idx: np.ndarray, rng: np.random.Generator, grid: tuple[int, int]):
+    """One augmented batch: images (B, 3, H, W) on the images' device and the targets on a ``grid``
+    (GH, GW) as tensors on that device."""
     torch = _torch()
     dev = train_images.device
     d = draw(rng, len(idx))
@@ -298,7 +301,7 @@ def _batch(train_images, train_boxes, idx: np.ndarray, rng: np.random.Generator)
         bs.append(b)
         igs.append(ig)
     x = augment_images(train_images[torch.as_tensor(idx, device=dev)], d)
-    tbox, pos, ign = build_targets(bs, igs)
+    tbox, pos, ign = build_targets(bs, igs, grid)
     return x, torch.from_numpy(tbox).to(dev), torch.from_numpy(pos).to(dev), torch.from_numpy(ign).to(dev)
 
 
@@ -334,6 +337,7 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
 
     model = build_model(arch).to(device).to(memory_format=torch.channels_last)
     n_params = count_parameters(model)
+    grid = tuple(layout.output_shape(model.stride)[2:])
     decay, no_decay = [], []
     for name, p in model.named_parameters():
         (no_decay if p.ndim <= 1 else decay).append(p)
@@ -354,7 +358,7 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
         sums = torch.zeros(3, device=device)  # summed on the device: no wait for it every step
         for k in range(steps_per_epoch):
             idx = order[k * batch_size:(k + 1) * batch_size]
-            x, tbox, pos, ign = _batch(train_images, train_data["boxes"], idx, rng)
+            x, tbox, pos, ign = _batch(train_images, train_data["boxes"], idx, rng, grid)
             for g in opt.param_groups:
                 g["lr"] = lr_at(step, total_steps, lr, warmup)
             out = model(x)
@@ -416,7 +420,7 @@ def _train(data_dir, out_dir, epochs, seed, batch_size, threads, progress, lr, w
         "arch": arch,
         "input": {"name": "images", "shape": [1, 3, layout.INPUT_H, layout.INPUT_W],
                   "format": "RGB float32 in [0, 1], resize_for_network then to_tensor"},
-        "output": {"name": "preds", "shape": [1, layout.CHANNELS, layout.GRID_H, layout.GRID_W],
+        "output": {"name": "preds", "shape": list(layout.output_shape(final.stride)),
                    "decode": "dodt.learned.layout.decode"},
         "score_threshold": threshold,
         "nms_iou": NMS_IOU,

@@ -86,6 +86,62 @@ def test_targets_follow_the_decode():
     np.testing.assert_allclose(boxes[0], t, atol=1e-5)
 
 
+def test_targets_follow_the_decode_on_the_stride_8_grid():
+    grid = tuple(layout.output_shape(8)[2:])
+    assert grid == (32, 44)
+    gh, gw = grid
+    cx, cy, w, h = 20.4 / gw, 11.7 / gh, 0.03, 0.09  # a small, far person
+    box = np.array([[cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2]])
+    tbox, pos, ign = tr.build_targets([box], [np.zeros((0, 4))], grid)
+    assert pos.shape == (1, gh, gw)
+    assert set(zip(*np.nonzero(pos[0]))) == {(11, 20), (11, 21), (12, 20), (12, 21)}
+    gy, gx = 12, 21
+    t = tbox[0, gy, gx]
+    raw = np.full((5, gh, gw), -20, np.float32)
+    raw[0, gy, gx] = 20
+    raw[1, gy, gx] = np.arctanh((t[0] + t[2]) / 2 * gw - gx)
+    raw[2, gy, gx] = np.arctanh((t[1] + t[3]) / 2 * gh - gy)
+    raw[3, gy, gx] = np.log((t[2] - t[0]) / (1 - (t[2] - t[0])))
+    raw[4, gy, gx] = np.log((t[3] - t[1]) / (1 - (t[3] - t[1])))
+    boxes, _ = layout.decode(raw, 0.5)
+    np.testing.assert_allclose(boxes[0], box[0], atol=1e-5)
+    with pytest.raises(ValueError, match="expected \\(5, GH, GW\\)"):
+        layout.decode(raw[:4], 0.5)
+
+
+def test_stride_8_model_trains_exports_and_runs_at_run_time(data_dir, tmp_path):
+    from dodt.learned.model import PersonDetector2D
+
+    info = tr.train(data_dir, tmp_path, epochs=2, seed=1, batch_size=8, threads=1, progress=lambda s: None,
+                    eval_every=0, arch="wide8")
+    assert info["output"]["shape"] == [1, 5, 32, 44] and "stride-8 head" in info["architecture"]
+    assert info["parameters"] == count_parameters(build_model("wide8")) <= 500_000
+    assert info["onnx_max_abs_diff"] < 1e-3
+    model = build_model("wide8")
+    model.load_state_dict(torch.load(tmp_path / "person_detector.pt"))
+    image = evaluate.load_split(data_dir / "val.npz")["images"][0]
+    det = PersonDetector2D(tmp_path / "person_detector.onnx", score_threshold=0.05, soft_sigma=0)
+    raw = det.raw(image)
+    assert raw.shape == (5, 32, 44)
+    np.testing.assert_allclose(raw, tr.predict(model, image[None])[0], atol=1e-3)
+    # the run time decodes on the model's own grid: its boxes are those of the stride-8 decode
+    boxes, scores = det(image)
+    b, s = layout.decode(raw, 0.05)
+    keep = layout.nms(b, s, 0.45)
+    np.testing.assert_allclose(boxes, b[keep] * np.array([352, 256, 352, 256], np.float32), atol=1e-3)
+    np.testing.assert_allclose(scores, s[keep], atol=1e-6)
+
+
+def test_a_model_on_another_grid_is_refused_at_run_time(tmp_path):
+    from dodt.learned.model import ModelError, PersonDetector2D
+
+    path = tmp_path / "stride32.onnx"
+    tr.export_onnx(torch.nn.Conv2d(3, 5, 32, 32), path)  # a (1, 5, 8, 11) output: stride 32
+    (tmp_path / "stride32.json").write_text(json.dumps({"sha256": sha256_of(path)}))
+    with pytest.raises(ModelError, match=r"stride32.onnx: output .*\[1, 5, 8, 11\].* is not one of .*strides 16, 8"):
+        PersonDetector2D(path)
+
+
 def test_network_sizes_and_training_options_are_checked(data_dir, tmp_path):
     assert count_parameters(build_model("base")) == count_parameters(build_model()) < count_parameters(build_model("wide")) <= 500_000
     with pytest.raises(ValueError, match="unknown 'huge'"):
