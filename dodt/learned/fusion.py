@@ -27,7 +27,7 @@ from dodt.config import LearnedConfig
 from dodt.detection import Detection
 from dodt.ensemble import mutual_best_pairs
 from dodt.geometry import iou_matrix
-from dodt.learned.lifting import lift_box
+from dodt.learned.lifting import lift_boxes
 
 
 def fuse_learned(fused: list[Detection], learned: list[Detection], camera: np.ndarray,
@@ -101,7 +101,7 @@ class YoloMAD:
         boxes, scores = self.detector(frame.color)
         t1 = time.perf_counter()
         T = np.asarray(frame.T_world_camera, dtype=np.float64)
-        lifted = [lift_box(depth_m, b, frame.intrinsics, T, self.cfg) for b in boxes]
+        lifted = lift_boxes(depth_m, boxes, frame.intrinsics, T, self.cfg)
         learned = [d for d in lifted if d is not None]
         out = fuse_learned(fused, learned, T[:3, 3], self.cfg)
         t2 = time.perf_counter()

@@ -19,6 +19,10 @@ as holes), and a box whose d~ lies beyond ``max_lift_range`` is dropped (near th
 limit the far half of the noisy depths is missing). The world box then passes the reference
 code's size sanity rule: a dimension less than half or more than twice the person size is
 replaced by it, and a replaced height stands on the floor.
+
+People in front (ours, `lift_boxes`): a box overlapped by the box of a person nearer on the same
+floor (`in_front`) reads no depth inside that box that is not farther than that person's own
+depth range, so a person half hidden behind another is not lifted onto him.
 """
 from __future__ import annotations
 
@@ -48,8 +52,9 @@ def core_box(box_px, cfg: LearnedConfig) -> tuple[float, float, float, float]:
     return (x1 + cfg.core_x[0] * w, y1 + cfg.core_y[0] * h, x1 + cfg.core_x[1] * w, y1 + cfg.core_y[1] * h)
 
 
-def box_depths(depth_m: np.ndarray, box_px, cfg: LearnedConfig) -> np.ndarray:
-    """The valid depths inside a 2D box, less ``margin_px`` on each side."""
+def box_depths(depth_m: np.ndarray, box_px, cfg: LearnedConfig, hidden=()) -> np.ndarray:
+    """The valid depths inside a 2D box, less ``margin_px`` on each side, less those inside each
+    ``hidden`` (x1, y1, x2, y2, d) box (pixels) that are not farther than d."""
     h, w = depth_m.shape
     x1, y1, x2, y2 = box_px
     c0 = int(np.clip(np.floor(x1) + cfg.margin_px, 0, w))
@@ -57,7 +62,25 @@ def box_depths(depth_m: np.ndarray, box_px, cfg: LearnedConfig) -> np.ndarray:
     r0 = int(np.clip(np.floor(y1) + cfg.margin_px, 0, h))
     r1 = int(np.clip(np.ceil(y2) - cfg.margin_px, 0, h))
     patch = depth_m[r0:r1, c0:c1]
-    return patch[(patch >= cfg.depth_min) & (patch <= cfg.depth_max)]
+    keep = (patch >= cfg.depth_min) & (patch <= cfg.depth_max)
+    for hx1, hy1, hx2, hy2, d in hidden:
+        a0, a1 = int(np.clip(np.floor(hx1), c0, c1)) - c0, int(np.clip(np.ceil(hx2), c0, c1)) - c0
+        b0, b1 = int(np.clip(np.floor(hy1), r0, r1)) - r0, int(np.clip(np.ceil(hy2), r0, r1)) - r0
+        keep[b0:b1, a0:a1] &= patch[b0:b1, a0:a1] > d
+    return patch[keep]
+
+
+def in_front(box_px, other_px, margin: float) -> bool:
+    """Whether ``other`` (pixels) is the box of a person in front of the one in ``box`` and covers
+    part of it: the two overlap, ``other``'s bottom edge is lower and it is taller, each by
+    ``margin`` times ``box``'s height (nearer on the same floor), and ``box`` reaches past one of
+    its sides by ``margin`` of its width (a box within the other's sides is a part of that person)."""
+    x1, y1, x2, y2 = (float(v) for v in box_px)
+    ox1, oy1, ox2, oy2 = (float(v) for v in other_px)
+    h, w = y2 - y1, x2 - x1
+    overlap = min(x2, ox2) > max(x1, ox1) and min(y2, oy2) > max(y1, oy1)
+    sticks_out = x1 < ox1 - margin * w or x2 > ox2 + margin * w
+    return overlap and sticks_out and oy2 > y2 + margin * h and (oy2 - oy1) > (1.0 + margin) * h
 
 
 def size_sanity(lo: np.ndarray, hi: np.ndarray, cfg: LearnedConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -78,12 +101,27 @@ def farthest_person_depth(box_px, K: CameraIntrinsics, height: float) -> float:
     return K.fy * height / max(float(box_px[3]) - float(box_px[1]), 1.0)
 
 
-def lift_box(depth_m: np.ndarray, box_px, K: CameraIntrinsics, T_world_camera: np.ndarray,
-             cfg: LearnedConfig) -> Detection | None:
-    """The 3D world box of one 2D person box, or None when the box holds too few valid depths."""
-    depths = box_depths(depth_m, core_box(box_px, cfg), cfg)
+def lift_boxes(depth_m: np.ndarray, boxes_px, K: CameraIntrinsics, T_world_camera: np.ndarray,
+               cfg: LearnedConfig) -> list[Detection | None]:
+    """`lift_box` for each of one image's person boxes. A box with people in front of him
+    (`in_front`) reads no depth inside their boxes within their own depth range."""
+    boxes = [tuple(float(v) for v in b) for b in boxes_px]
+    ranges = [box_depth_range(depth_m, b, K, cfg) for b in boxes]
+    out = []
+    for i, b in enumerate(boxes):
+        hidden = () if cfg.occluder_margin is None else tuple(
+            (*o, ranges[j][2] + cfg.occluder_depth_margin) for j, o in enumerate(boxes)
+            if j != i and ranges[j] is not None and in_front(b, o, cfg.occluder_margin))
+        out.append(lift_box(depth_m, b, K, T_world_camera, cfg, hidden))
+    return out
+
+
+def box_depth_range(depth_m: np.ndarray, box_px, K: CameraIntrinsics, cfg: LearnedConfig,
+                    hidden=()) -> tuple[float, float, float] | None:
+    """(d~, d_min, d_max) of the person in a 2D box, or None (too few depths, or too far)."""
+    depths = box_depths(depth_m, core_box(box_px, cfg), cfg, hidden)
     if depths.size < cfg.min_depth_pixels:
-        depths = box_depths(depth_m, box_px, cfg)
+        depths = box_depths(depth_m, box_px, cfg, hidden)
     if cfg.max_person_height is not None:
         depths = depths[depths <= farthest_person_depth(box_px, K, cfg.max_person_height)]
     if depths.size < cfg.min_depth_pixels:
@@ -91,6 +129,17 @@ def lift_box(depth_m: np.ndarray, box_px, K: CameraIntrinsics, T_world_camera: n
     med, d_min, d_max = mad_depth_range(depths, cfg.mad_n, cfg.depth_percentile)
     if cfg.max_lift_range is not None and med > cfg.max_lift_range:
         return None
+    return med, d_min, d_max
+
+
+def lift_box(depth_m: np.ndarray, box_px, K: CameraIntrinsics, T_world_camera: np.ndarray,
+             cfg: LearnedConfig, hidden=()) -> Detection | None:
+    """The 3D world box of one 2D person box, or None when the box holds too few valid depths
+    (``hidden``: see `box_depths`)."""
+    rng = box_depth_range(depth_m, box_px, K, cfg, hidden)
+    if rng is None:
+        return None
+    med, d_min, d_max = rng
     # The paper centres the box on the median plane; a body's visible surface lies in front of its
     # centre, so ours sits ``center_behind_median`` further back. Its depth is the MAD range's.
     mid = med + cfg.center_behind_median

@@ -231,3 +231,27 @@ def test_fusion_replaces_a_fragment_of_the_person_by_the_union():
     whole = _box((5.9, 1.18, 0.85), (0.5, 0.5, 1.7))
     out = fuse_learned([whole], [lifted], np.zeros(3), CFG)
     assert out[0].is_person and np.allclose(out[0].size, whole.size)
+
+
+def test_a_person_half_hidden_behind_another_is_lifted_to_his_own_depth():
+    from dodt.learned.lifting import in_front, lift_boxes
+
+    back_depth, back = _scene(6.0, 0.3, seed=1)
+    front_depth, front = _scene(3.5, 0.0, seed=2)
+    depth = np.where((back_depth > 0) & (front_depth > 0), np.minimum(back_depth, front_depth), 0.0).astype(np.float32)
+    assert in_front(back, front, CFG.occluder_margin) and not in_front(front, back, CFG.occluder_margin)
+    # read through the person in front, the percentile depth of the box behind is his
+    alone = lift_box(depth, back, K, T, CFG)
+    assert alone is not None and abs(alone.center[0] - 3.5) < 0.5
+    lifted_front, lifted_back = lift_boxes(depth, [front, back], K, T, CFG)
+    assert abs(lifted_front.center[0] - CFG.center_behind_median - (3.5 - 0.17)) < 0.10
+    assert abs(lifted_back.center[0] - CFG.center_behind_median - (6.0 - 0.17)) < 0.15, lifted_back.center
+    # a box on a part of the front person (his upper half, within his box's sides) is lifted onto
+    # him, not onto the background seen past him
+    x1, y1, x2, y2 = front
+    part = (x1 + 0.1 * (x2 - x1), y1, x2 - 0.1 * (x2 - x1), (y1 + y2) / 2)
+    assert not in_front(part, front, CFG.occluder_margin)
+    assert abs(lift_boxes(depth, [front, part], K, T, CFG)[1].center[0] - 3.5) < 0.3
+    # switched off, each box is lifted on its own
+    off = replace(CFG, occluder_margin=None)
+    assert np.allclose(lift_boxes(depth, [front, back], K, T, off)[1].center, lift_box(depth, back, K, T, off).center)
