@@ -112,7 +112,9 @@ def lift_boxes(depth_m: np.ndarray, boxes_px, K: CameraIntrinsics, T_world_camer
         hidden = () if cfg.occluder_margin is None else tuple(
             (*o, ranges[j][2] + cfg.occluder_depth_margin) for j, o in enumerate(boxes)
             if j != i and ranges[j] is not None and in_front(b, o, cfg.occluder_margin))
-        out.append(lift_box(depth_m, b, K, T_world_camera, cfg, hidden))
+        # a box with nobody in front keeps the range read above
+        rng = box_depth_range(depth_m, b, K, cfg, hidden) if hidden else ranges[i]
+        out.append(None if rng is None else box_at_range(b, rng, K, T_world_camera, cfg))
     return out
 
 
@@ -137,8 +139,12 @@ def lift_box(depth_m: np.ndarray, box_px, K: CameraIntrinsics, T_world_camera: n
     """The 3D world box of one 2D person box, or None when the box holds too few valid depths
     (``hidden``: see `box_depths`)."""
     rng = box_depth_range(depth_m, box_px, K, cfg, hidden)
-    if rng is None:
-        return None
+    return None if rng is None else box_at_range(box_px, rng, K, T_world_camera, cfg)
+
+
+def box_at_range(box_px, rng: tuple[float, float, float], K: CameraIntrinsics, T_world_camera: np.ndarray,
+                 cfg: LearnedConfig) -> Detection:
+    """The 3D world box of a 2D person box whose depths give ``rng`` (d~, d_min, d_max)."""
     med, d_min, d_max = rng
     # The paper centres the box on the median plane; a body's visible surface lies in front of its
     # centre, so ours sits ``center_behind_median`` further back. Its depth is the MAD range's.
