@@ -255,10 +255,7 @@ class MPCPlanner:
             if age > c.ghost_time or t - first < c.ghost_min_age:
                 del self._seen[oid]
                 continue
-            pos, vel = ob.predict(np.array([age]))[0], ob.velocity + ob.acceleration * min(age, ob.accel_horizon)
-            sp = float(np.linalg.norm(vel))
-            if sp > ob.max_speed:
-                vel = vel * (ob.max_speed / sp)
+            pos, vel = ob.predict(np.array([age]))[0], ob.cruise_velocity(np.array([age]))[0]
             d = pos[:2] - p
             if inp.yaw is not None and np.hypot(*d) < c.ghost_view_range:
                 off = abs((math.atan2(d[1], d[0]) - inp.yaw + math.pi) % (2 * math.pi) - math.pi)

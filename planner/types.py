@@ -36,11 +36,16 @@ class ObstaclePrediction:
         """Centres at ``times`` seconds ahead (K,) -> (K, 3)."""
         t = np.asarray(times, dtype=float)[:, None]
         ta = np.minimum(t, self.accel_horizon)
-        v_end = self.velocity + self.acceleration * ta
-        speed = np.linalg.norm(v_end, axis=1, keepdims=True)
-        scale = np.where(speed > self.max_speed, self.max_speed / np.maximum(speed, 1e-9), 1.0)
-        disp = (self.velocity * ta + 0.5 * self.acceleration * ta * ta) + v_end * scale * (t - ta)
+        disp = (self.velocity * ta + 0.5 * self.acceleration * ta * ta) + self.cruise_velocity(times) * (t - ta)
         return self.center + disp
+
+    def cruise_velocity(self, times: np.ndarray) -> np.ndarray:
+        """(K, 3): the velocity the prediction goes on at after accelerating for min(t, accel_horizon), its
+        speed capped at max_speed (the velocity from accel_horizon on)."""
+        t = np.asarray(times, dtype=float)[:, None]
+        v_end = self.velocity + self.acceleration * np.minimum(t, self.accel_horizon)
+        speed = np.linalg.norm(v_end, axis=1, keepdims=True)
+        return v_end * np.where(speed > self.max_speed, self.max_speed / np.maximum(speed, 1e-9), 1.0)
 
     def std_at(self, times: np.ndarray) -> np.ndarray:
         """Position standard deviation at ``times`` seconds ahead (K,)."""
