@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from planner.global_path import cost_to_go
-from planner.maneuvers import ManeuverConfig, ManeuverSelector, hypotheses, static_clearance
+from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, hypotheses, static_clearance, view_costs
 from planner.mpc import MPC, MPCConfig
 from planner.types import ObstaclePrediction
 
@@ -177,3 +177,54 @@ def test_the_mpc_follows_the_guides_side():
         person = ob.predict(t)
         k = int(np.argmin(np.linalg.norm(r.trajectory.positions[1:, :2] - person[:, :2], axis=1)))
         assert np.sign(r.trajectory.positions[k + 1, 1] - person[k, 1]) == side
+
+
+# --- view term ----------------------------------------------------------------------------------------
+
+HEADINGS = np.radians(np.arange(-180, 180, 5.0))
+HALF_VIEW = 0.759 - 0.15
+
+
+def _line(p0, v, n=25, dt=0.1):
+    return np.asarray(p0, float) + np.outer(dt * np.arange(1, n + 1), v)
+
+
+def _view(P, watch, fallback=math.nan):
+    """view_costs of candidates P (C, 25, 2) from (0, 0), watching points (O, 2, 2) at 0.5 s and 1 s."""
+    return view_costs(np.ascontiguousarray(P, dtype=float), np.zeros(2), 10, 1.0, fallback,
+                      np.asarray(watch, float).reshape(-1, 2, 2), np.array([5, 10]), 3.0, HALF_VIEW, HEADINGS, 0.05)
+
+
+def test_view_cost_is_nil_when_one_heading_sees_the_motion_and_the_walker_and_grows_when_none_can():
+    ahead = [[[2.0, 0.3], [2.0, 0.3]]]  # a walker standing ahead, a little left
+    behind = [[[-1.0, 0.0], [-1.0, 0.0]]]  # one standing behind the start
+    fwd = _line([0, 0], [1.5, 0.0])[None]
+    cost, arg = _view(fwd, ahead)
+    assert cost[0] == pytest.approx(0.0) and abs(HEADINGS[arg[0]]) < HALF_VIEW
+    cost_b, _ = _view(fwd, behind)  # flying on away from him: motion and walker 180 degrees apart
+    slow = _line([0, 0], [0.2, 0.0])[None]  # hardly moving: the motion weighs less and he is nearer
+    cost_s, _ = _view(slow, behind, fallback=0.0)
+    assert cost_b[0] > 0.5 and cost_s[0] > 0.0
+    none, idx = _view(fwd[:, :, :] * 0.0 + 0.01, np.zeros((0, 2, 2)))  # no motion, no fallback, nobody
+    assert none[0] == 0.0 and idx[0] == -1
+    far = [[[10.0, 5.0], [10.0, 5.0]]]  # beyond the watch range: only the motion counts
+    cost_f, arg_f = _view(fwd, far)
+    assert cost_f[0] == pytest.approx(0.0) and HEADINGS[arg_f[0]] == 0.0
+
+
+def test_the_view_term_trades_path_for_a_view_the_camera_can_hold():
+    """A walker close behind and beside the drone that flies on: with the view term the choice keeps him and
+    its motion easier to hold in one view (lower view cost) than the choice without it, and its cost says so."""
+    sel0, sel1 = ManeuverSelector(), ManeuverSelector()
+    p, v = np.array([6.0, 0.0]), np.array([1.5, 0.0])
+    ob = _person(5.2, 0.9, 0.8, 0.0)  # just passed, walking the drone's way
+    watch = ob.predict(np.array([0.5, 1.0]))[None, :, :2]
+    term = lambda w: ViewTerm(w, HEADINGS, HALF_VIEW, 10, 1.0, 0.0, watch, np.array([5, 10]), 3.0, 0.05)  # noqa: E731
+    clear, field = _fields()
+    plain = sel0.choose(0.0, p, v, GOAL - p, [ob], clear, field, ORIGIN, RES, GOAL, view=term(0.0))
+    viewed = sel1.choose(0.0, p, v, GOAL - p, [ob], clear, field, ORIGIN, RES, GOAL, view=term(3.0))
+    assert "view" not in plain.parts and viewed.parts["view"] >= 0.0
+    c_plain = _view(plain.positions[None, 1:] - p, watch - p)[0][0]
+    c_viewed = _view(viewed.positions[None, 1:] - p, watch - p)[0][0]
+    assert c_plain > 0.0  # flying on at speed leaves him out of any view that holds the motion
+    assert c_viewed < c_plain and viewed.parts["view"] == pytest.approx(3.0 * c_viewed, abs=1e-3)
