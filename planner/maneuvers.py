@@ -107,6 +107,14 @@ class ViewTerm:
     watch_range: float  # m
     pull: float  # per rad between the heading and the motion
 
+    def costs(self, P: np.ndarray, p0) -> tuple[np.ndarray, np.ndarray]:
+        """view_costs of candidates P (C, N, 2) from p0: the least view cost (C,) and its heading index (C,)."""
+        return view_costs(np.ascontiguousarray(P, dtype=float), np.asarray(p0, float)[:2], self.look_step,
+                          self.look_time, self.fallback,
+                          np.ascontiguousarray(self.watch, dtype=float).reshape(-1, len(self.watch_steps), 2),
+                          np.asarray(self.watch_steps, np.int64), self.watch_range, self.half_view,
+                          np.asarray(self.headings, float), self.pull)
+
 
 @dataclass(frozen=True, eq=False)
 class Maneuver:
@@ -430,10 +438,7 @@ class ManeuverSelector:
                    cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]), cfg.near_goal, r_goal, m_goal, parts)
         names = ["goal", "static", "dynamic", "keep", "effort"]
         if view is not None and view.weight > 0:
-            vc, _ = view_costs(np.ascontiguousarray(P), p0, view.look_step, view.look_time, view.fallback,
-                               np.ascontiguousarray(view.watch, dtype=float).reshape(-1, len(view.watch_steps), 2),
-                               np.asarray(view.watch_steps, np.int64), view.watch_range, view.half_view,
-                               np.asarray(view.headings, float), view.pull)
+            vc, _ = view.costs(P, p0)
             J = J + view.weight * vc
             parts = np.column_stack([parts, view.weight * vc])
             names.append("view")

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.global_path import PathFollower, cost_to_go, grid_path
-from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance, view_costs
+from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
 from planner.mpc import MPC, MPCConfig
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 
@@ -319,9 +319,7 @@ class MPCPlanner:
         """The heading, every 5 degrees, that best keeps the maneuver's direction and nearby moving obstacles
         in view (config; maneuvers.view_costs); path_yaw when there is nothing to keep in view."""
         v = self._view_term(path_yaw, 0.0)
-        _, arg = view_costs(self.last_maneuver.positions[None, 1:], np.asarray(inp.position, float)[:2],
-                            v.look_step, v.look_time, v.fallback, v.watch, v.watch_steps, v.watch_range,
-                            v.half_view, v.headings, v.pull)
+        _, arg = v.costs(self.last_maneuver.positions[None, 1:], inp.position)
         return path_yaw if arg[0] < 0 else float(v.headings[arg[0]])
 
     def plan(self, inp: PlannerInput) -> Trajectory:
