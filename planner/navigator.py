@@ -286,9 +286,9 @@ class MPCPlanner:
         ahead, _ = f.at(np.array([f.project(inp.position[:2]) + distance]))
         return ahead[0] - inp.position[:2]
 
-    def guided_reference(self, inp: PlannerInput, path_yaw: float | None = None):
-        """(p_ref, v_ref) for the MPC from the maneuver layer (also its guide: the chosen maneuver);
-        path_yaw: the heading toward the path ahead, for the view term (NavigatorConfig.view_weight)."""
+    def guided_reference(self, inp: PlannerInput, view: ViewTerm | None = None):
+        """(p_ref, v_ref) for the MPC from the maneuver layer (also its guide: the chosen maneuver); with
+        ``view``, the maneuvers are scored on it too (NavigatorConfig.view_weight)."""
         m = self.cfg.mpc
         d = self._toward_path_ahead(inp, self.cfg.guide_look_ahead)
         if np.hypot(*d) < 0.2:
@@ -296,7 +296,6 @@ class MPCPlanner:
         if np.hypot(*d) < 1e-6:
             d = np.array([1.0, 0.0])
         clear, goal = self._static_fields(inp)
-        view = self._view_term(path_yaw, self.cfg.view_weight) if self.cfg.view_weight > 0 else None
         man = self.selector.choose(inp.stamp, inp.position, inp.velocity, d, self._obstacles, clear, goal,
                                    inp.occupancy.xy_origin, inp.occupancy.res, inp.goal[:2], view=view)
         self.last_maneuver = man
@@ -305,22 +304,22 @@ class MPCPlanner:
         v_ref = np.column_stack([man.velocities[1:], np.zeros(m.horizon)])
         return p_ref, v_ref
 
-    def _view_term(self, path_yaw: float | None, weight: float) -> ViewTerm:
-        """The heading rule's bearings (config) as a maneuvers.ViewTerm over this call's obstacles."""
+    def _view_term(self, path_yaw: float | None) -> ViewTerm:
+        """The heading rule's bearings (config) as a maneuvers.ViewTerm over this call's obstacles, weighted
+        NavigatorConfig.view_weight for the maneuvers."""
         c = self.cfg
         steps = lambda t, lo: min(max(int(round(t / c.mpc.dt)), lo), c.mpc.horizon)  # noqa: E731
         times = np.asarray(c.watch_times, float)
         watch = np.array([ob.predict(times)[:, :2] for ob in self._obstacles], float).reshape(-1, len(times), 2)
-        return ViewTerm(weight, _HEADINGS, c.camera_half_fov - c.fov_margin, steps(c.heading_look_time, 1),
+        return ViewTerm(c.view_weight, _HEADINGS, c.camera_half_fov - c.fov_margin, steps(c.heading_look_time, 1),
                         c.heading_look_time, math.nan if path_yaw is None else path_yaw, watch,
                         np.array([steps(t, 0) for t in c.watch_times], np.int64), c.watch_range, 0.05)
 
-    def _heading(self, inp: PlannerInput, path_yaw: float | None) -> float | None:
+    def _heading(self, inp: PlannerInput, path_yaw: float | None, view: ViewTerm) -> float | None:
         """The heading, every 5 degrees, that best keeps the maneuver's direction and nearby moving obstacles
-        in view (config; maneuvers.view_costs); path_yaw when there is nothing to keep in view."""
-        v = self._view_term(path_yaw, 0.0)
-        _, arg = v.costs(self.last_maneuver.positions[None, 1:], inp.position)
-        return path_yaw if arg[0] < 0 else float(v.headings[arg[0]])
+        in view (config; view: this call's _view_term); path_yaw when there is nothing to keep in view."""
+        _, arg = view.costs(self.last_maneuver.positions[None, 1:], inp.position)
+        return path_yaw if arg[0] < 0 else float(view.headings[arg[0]])
 
     def plan(self, inp: PlannerInput) -> Trajectory:
         """The trajectory to fly from ``inp``; its solve_ms is the whole call's wall time (path search,
@@ -328,11 +327,12 @@ class MPCPlanner:
         tic = time.perf_counter()
         self._obstacles = self._with_ghosts(inp)
         self._update_path(inp)
-        guide = None
+        guide = view = None
         d = self._toward_path_ahead(inp, self.cfg.look_ahead)
         yaw = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else None
         if self.selector is not None and inp.occupancy is not None:
-            p_ref, v_ref = self.guided_reference(inp, yaw)
+            view = self._view_term(yaw)  # the maneuvers' view term (when weighted) and the heading's
+            p_ref, v_ref = self.guided_reference(inp, view if self.cfg.view_weight > 0 else None)
             guide = p_ref
         else:
             p_ref, v_ref = self.reference(inp)
@@ -348,7 +348,7 @@ class MPCPlanner:
                              geofence=inp.geofence if self.cfg.use_geofence else None, guide=guide)
         traj = res.trajectory
         if guide is not None:
-            yaw = self._heading(inp, yaw)
+            yaw = self._heading(inp, yaw, view)
         elif self.cfg.mpc.fov_half_angle is not None:
             # The MPC keeps the motion inside the camera's view: the heading must lead it round, so it
             # faces the planned motion (the path ahead when slow).
