@@ -376,26 +376,44 @@ class Walker:
     def global_scaling(self) -> float:
         return HUMANOID_BASE_SCALE * self.k
 
-    def pose(self, t: float):
-        """(base position, base quaternion, joint targets for _SPHERICAL + _REVOLUTE)."""
-        table = _pose_table()
+    def pose_at(self, t: float) -> "WalkerPose":
+        """Where the person is at sim time t and which gait sample it shows."""
         s = self.path.distance(t)
+        xy = self.path.point_at(s)
+        table = _pose_table()
         k = int(s / (self.clip.stride * self.k) % 1.0 * len(table.targets))
-        off = table.root_offset[k]
-        yaw = self.path.heading(t)
-        cy, sy = math.cos(yaw), math.sin(yaw)
+        return WalkerPose(float(xy[0]), float(xy[1]), self.path.heading(t), k)
+
+    def body_pose(self, pose: "WalkerPose"):
+        """(base position, base quaternion, joint targets for _SPHERICAL + _REVOLUTE) of a WalkerPose."""
+        table = _pose_table()
+        off = table.root_offset[pose.k]
+        cy, sy = math.cos(pose.yaw), math.sin(pose.yaw)
         # Clip frame (x forward, y up, z right-ish) -> world after the +90 deg roll: (x, -z, y).
         lx, ly = off[0] * self.k, -off[2] * self.k
-        xy = self.path.point_at(s)
-        pos = [xy[0] + cy * lx - sy * ly, xy[1] + sy * lx + cy * ly, off[1] * self.k]
-        q_yaw = np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
-        quat = _qmul(q_yaw, table.base_quat[k])
-        return pos, quat, table.targets[k]
+        pos = [pose.x + cy * lx - sy * ly, pose.y + sy * lx + cy * ly, off[1] * self.k]
+        q_yaw = np.array([0.0, 0.0, math.sin(pose.yaw / 2), math.cos(pose.yaw / 2)])
+        quat = _qmul(q_yaw, table.base_quat[pose.k])
+        return pos, quat, table.targets[pose.k]
 
-    def apply(self, p, t: float) -> None:
-        pos, quat, targets = self.pose(t)
+    def apply_pose(self, p, pose: "WalkerPose") -> None:
+        """Pose the person's bodies in every client they live in."""
+        pos, quat, targets = self.body_pose(pose)
         quat = quat.tolist()
         joints = _SPHERICAL + _REVOLUTE
         for client, body in self.bodies:
             p.resetBasePositionAndOrientation(body, pos, quat, physicsClientId=client)
             p.resetJointStatesMultiDof(body, joints, targets, physicsClientId=client)
+
+    def apply(self, p, t: float) -> None:
+        self.apply_pose(p, self.pose_at(t))
+
+
+@dataclass(frozen=True)
+class WalkerPose:
+    """A person's pose as the renderer needs it: root position on the floor, heading, gait sample."""
+
+    x: float
+    y: float
+    yaw: float  # rad
+    k: int  # index into the gait cycle's pose table

@@ -1,10 +1,9 @@
 """Camera rendering in a second process, so that it runs beside the rest of a closed loop.
 
 The child builds its own copy of the world from the same scenario and seed (same bodies, same
-colours, same people's paths) and renders nothing but what it is asked: for each captured frame
-the parent sends the sim time and the drone's pose, the child poses the drone and the people at
-that time, renders, and sends the renderer's raw buffers back over a socket. Requests are answered
-in order; the parent decodes the buffers and draws the depth noise from its own stream in capture
+colours) and renders nothing but what it is asked: for each captured frame the parent sends the
+drone's pose and the people's poses, the child poses its bodies so, renders, and sends the
+renderer's raw buffers back over a socket. Requests are answered in order; the parent decodes the buffers and draws the depth noise from its own stream in capture
 order, so the frames are bit-identical to rendering in the parent (tested).
 
 It pays off only when the parent has something to do while the child renders: the World asks for
@@ -50,13 +49,13 @@ def _serve(conn, scenario, seed, renderer, segmentation, light_direction) -> Non
             msg = conn.recv()
             if msg is None:
                 break
-            seq, t, pos, quat, light = msg
+            seq, t, pos, quat, people, light = msg
             t0 = time.perf_counter()
             if seq == 0 and first is not None:
                 images, first = first, None
             else:
                 world.light_direction = light
-                images = world.render_at(t, pos, quat)
+                images = world.render_at(pos, quat, people)
             render_s = time.perf_counter() - t0
             conn.send(("frame", seq, render_s, [None if a is None else (a.dtype.str, a.shape) for a in images]))
             for a in images:
@@ -110,10 +109,11 @@ class RenderProcess:
             raise RenderProcessError(f"the render process failed ({doing}): {msg[1]}")
         return msg[0], msg[1:] if len(msg) > 2 else msg[1]
 
-    def submit(self, seq: int, t: float, pos, quat, light_direction) -> None:
+    def submit(self, seq: int, t: float, pos, quat, people, light_direction) -> None:
+        """Frame ``seq`` captured at sim time t: the drone's pose and the people's (sim.people.WalkerPose)."""
         light = None if light_direction is None else [float(x) for x in light_direction]
         try:
-            self._conn.send((seq, float(t), tuple(pos), tuple(quat), light))
+            self._conn.send((seq, float(t), tuple(pos), tuple(quat), list(people), light))
         except (BrokenPipeError, OSError):
             raise RenderProcessError(f"the render process stopped (exit code {self._proc.poll()})") from None
         self._outstanding.append(seq)

@@ -632,12 +632,16 @@ class World:
             seg = self._seg_lut[s + 1]
         return depth_mm, color, seg
 
-    def render_at(self, t: float, pos, quat):
-        """Pose the drone and the people as they are at sim time ``t`` and render: the renderer's
-        raw buffers (the render process's entry; nothing is stepped, no noise is drawn)."""
+    def people_poses(self) -> list:
+        """Every person's pose now (sim.people.WalkerPose), as the renderer draws them."""
+        return [w.pose_at(self.time) for w in self.walkers]
+
+    def render_at(self, pos, quat, people) -> tuple:
+        """Pose the drone at (pos, quat) and the people at their ``people_poses`` and render: the
+        renderer's raw buffers (the render process's entry; nothing is stepped, no noise is drawn)."""
         p.resetBasePositionAndOrientation(self.drone, list(pos), list(quat), physicsClientId=self._client)
-        for w in self.walkers:
-            w.apply(p, t)
+        for w, pose in zip(self.walkers, people):
+            w.apply_pose(p, pose)
         return self._render_buffers(self._T_from_pose(pos, quat) @ self.T_body_camera)
 
     def _capture(self) -> SensorFrame | None:
@@ -648,7 +652,7 @@ class World:
         T_body = self._T_from_pose(pos, quat)
         T_true = T_body @ self.T_body_camera
         if self._render_proc is not None:
-            self._render_proc.submit(seq, self.time, pos, quat, self.light_direction)
+            self._render_proc.submit(seq, self.time, pos, quat, self.people_poses(), self.light_direction)
             images = None  # asked of the render process at delivery
         elif self.render_on:
             images = self._finish_images(*self._render_buffers(T_true))
