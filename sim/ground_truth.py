@@ -60,13 +60,24 @@ class GroundTruth:
 
 @dataclass(frozen=True)
 class CollisionEvent:
-    """The drone's collision volume started touching something."""
+    """The drone's collision volume started touching something.
+
+    The states at the contact are what a collision's fault is judged from
+    (experiments.fault): the drone's velocity, the point of the other body nearest the drone,
+    and that body's velocity (zero for static bodies)."""
 
     time: float
     other_id: int  # obstacle id, or STRUCTURE_ID
     other_kind: str  # person | static | structure
     position: tuple[float, float, float]  # drone position at the event
+    drone_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    contact_point: tuple[float, float, float] | None = None  # on the other body, world frame
+    other_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def to_json(self) -> dict:
+        def r(v):
+            return None if v is None else [round(float(x), 4) for x in v]
+
         return {"time": round(self.time, 5), "other_id": self.other_id, "other_kind": self.other_kind,
-                "position": [round(float(x), 4) for x in self.position]}
+                "position": r(self.position), "drone_velocity": r(self.drone_velocity),
+                "contact_point": r(self.contact_point), "other_velocity": r(self.other_velocity)}

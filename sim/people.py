@@ -165,7 +165,35 @@ class WalkPath:
 
     def _profile(self, dirs: np.ndarray, seg_len: np.ndarray, acc: float) -> None:
         """Speed limits at the vertices, a forward (speeding up) and a backward (slowing down)
-        pass over a grid in s, then the time at each grid point."""
+        pass over a grid in s, then the time at each grid point. The route speed (``route_speed``) is
+        the same profile without the standing start."""
+        s, cap = self._caps(dirs, seg_len)
+        v = self._passes(s, cap, acc)
+        if self.start_delay > 0:
+            self._v_route = self._passes(s, np.concatenate([[self.speed], cap[1:]]), acc).tolist()
+        else:
+            self._v_route = v.tolist()
+        v2 = v ** 2
+        ds = np.diff(s)
+        dt = np.where(ds > 0, 2 * ds / np.maximum(v[:-1] + v[1:], 1e-9), 0.0)
+        self._s = s.tolist()
+        self._v = v.tolist()
+        self._t = np.concatenate([[0.0], np.cumsum(dt)]).tolist()
+        self._a = np.where(ds > 0, (v2[1:] - v2[:-1]) / np.maximum(2 * ds, 1e-12), 0.0).tolist()
+        self.duration = self._t[-1]  # s from the start to standing at the end
+
+    @staticmethod
+    def _passes(s: np.ndarray, cap: np.ndarray, acc: float) -> np.ndarray:
+        v2 = cap ** 2
+        ds = np.diff(s)
+        for k in range(1, len(s)):
+            v2[k] = min(v2[k], v2[k - 1] + 2 * acc * ds[k - 1])
+        for k in range(len(s) - 2, -1, -1):
+            v2[k] = min(v2[k], v2[k + 1] + 2 * acc * ds[k])
+        return np.sqrt(v2)
+
+    def _caps(self, dirs: np.ndarray, seg_len: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The grid in s and the speed limit at each of its points."""
         cum = np.asarray(self._cum)
         L = cum[-1]
         n_cells = np.maximum(np.ceil(seg_len / _SPEED_GRID).astype(int), 1)
@@ -186,19 +214,7 @@ class WalkPath:
             k = int(np.searchsorted(s, cum[i]))
             k = min(k, len(s) - 1)
             cap[k] = min(cap[k], v)
-        v2 = cap ** 2
-        ds = np.diff(s)
-        for k in range(1, len(s)):
-            v2[k] = min(v2[k], v2[k - 1] + 2 * acc * ds[k - 1])
-        for k in range(len(s) - 2, -1, -1):
-            v2[k] = min(v2[k], v2[k + 1] + 2 * acc * ds[k])
-        v = np.sqrt(v2)
-        dt = np.where(ds > 0, 2 * ds / np.maximum(v[:-1] + v[1:], 1e-9), 0.0)
-        self._s = s.tolist()
-        self._v = v.tolist()
-        self._t = np.concatenate([[0.0], np.cumsum(dt)]).tolist()
-        self._a = np.where(ds > 0, (v2[1:] - v2[:-1]) / np.maximum(2 * ds, 1e-12), 0.0).tolist()
-        self.duration = self._t[-1]  # s from the start to standing at the end
+        return s, cap
 
     @property
     def length(self) -> float:
@@ -223,6 +239,34 @@ class WalkPath:
 
     def _segment(self, s: float) -> int:
         return min(max(bisect.bisect_right(self._cum, s) - 1, 0), len(self._cum) - 2)
+
+    def route_speed(self, s: float) -> float:
+        """The speed the route asks for at arc length s (slower before corners and the end; a
+        person who started from standing walks it at full speed once under way)."""
+        if s >= self.length:
+            return 0.0
+        k = min(max(bisect.bisect_right(self._s, s) - 1, 0), len(self._s) - 2)
+        s0, s1 = self._s[k], self._s[k + 1]
+        w = (s - s0) / (s1 - s0) if s1 > s0 else 0.0
+        return (1 - w) * self._v_route[k] + w * self._v_route[k + 1]
+
+    def project(self, xy, s0: float, back: float = 0.3, ahead: float = 1.0) -> float:
+        """Arc length of the route point nearest to ``xy`` within [s0 - back, s0 + ahead], never less
+        than s0 (progress only grows; of nearly equal points the furthest, so that a U-turn's return
+        leg, lying on its way out, is taken once reached)."""
+        lo, hi = max(s0 - back, 0.0), min(s0 + ahead, self.length)
+        i0, i1 = self._segment(lo), self._segment(hi)
+        a = self.points[i0:i1 + 1]
+        d = np.asarray(self._dir[i0:i1 + 1])
+        cum = np.asarray(self._cum[i0:i1 + 1])
+        seg = np.asarray(self._cum[i0 + 1:i1 + 2]) - cum
+        q = np.asarray(xy, float)[:2]
+        r = np.clip(np.einsum("ij,ij->i", q - a, d), 0.0, seg)
+        s = np.clip(cum + r, lo, hi)
+        foot = a + d * (s - cum)[:, None]
+        dist = np.hypot(foot[:, 0] - q[0], foot[:, 1] - q[1])
+        best = float(np.max(s[dist <= dist.min() + 0.01]))
+        return max(best, s0)
 
     def point_at(self, s: float) -> np.ndarray:
         s = min(max(s, 0.0), self.length)
@@ -376,13 +420,11 @@ class Walker:
     def global_scaling(self) -> float:
         return HUMANOID_BASE_SCALE * self.k
 
-    def pose_at(self, t: float) -> "WalkerPose":
-        """Where the person is at sim time t and which gait sample it shows."""
-        s = self.path.distance(t)
-        xy = self.path.point_at(s)
-        table = _pose_table()
-        k = int(s / (self.clip.stride * self.k) % 1.0 * len(table.targets))
-        return WalkerPose(float(xy[0]), float(xy[1]), self.path.heading(t), k)
+    def gait_sample(self, walked: float) -> int:
+        """The gait cycle's sample shown after walking ``walked`` metres: the phase follows the distance
+        walked, so the feet do not slide whatever the speed."""
+        n = len(_pose_table().targets)
+        return int(walked / (self.clip.stride * self.k) % 1.0 * n)
 
     def body_pose(self, pose: "WalkerPose"):
         """(base position, base quaternion, joint targets for _SPHERICAL + _REVOLUTE) of a WalkerPose."""
@@ -405,8 +447,6 @@ class Walker:
             p.resetBasePositionAndOrientation(body, pos, quat, physicsClientId=client)
             p.resetJointStatesMultiDof(body, joints, targets, physicsClientId=client)
 
-    def apply(self, p, t: float) -> None:
-        self.apply_pose(p, self.pose_at(t))
 
 
 @dataclass(frozen=True)

@@ -7,9 +7,10 @@ README ("Scenario format").
 """
 from __future__ import annotations
 
+import copy
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +94,7 @@ class Person:
     radius: float | None = None  # circle
     clockwise: bool = False  # circle
     color: tuple[float, float, float] | None = None
+    sees_drone: bool | None = None  # None: the scenario's crowd.sees_drone
 
 
 @dataclass(frozen=True)
@@ -164,6 +166,24 @@ class CameraPath:
 
 
 @dataclass(frozen=True)
+class Crowd:
+    """How people move around each other and the drone (sim.crowd).
+
+    Every person follows its behaviour's route and keeps clear of the other people by the social
+    force model of Helbing & Molnar (1995); people who ``see`` the drone also keep clear of it.
+    The defaults are that paper's values but for step_time (sim.crowd says why)."""
+
+    sees_drone: bool = False  # default of every person (a person's own ``sees_drone`` overrides it)
+    relaxation_time: float = 0.5  # s, tau: how fast a person returns to its desired velocity
+    strength: float = 2.1  # m^2/s^2, V0 of the repulsive potential V(b) = V0 exp(-b / sigma)
+    range: float = 0.3  # m, sigma
+    step_time: float = 1.0  # s, Delta t: the other's step v Delta t stretches the potential along its motion
+    view_angle: float = math.radians(100.0)  # rad, half angle of the field of view (2 phi = 200 deg)
+    behind_weight: float = 0.5  # c: weight of what is outside the field of view
+    max_speed_factor: float = 1.3  # a person walks at most this times its route speed (and never over 1.6 m/s)
+
+
+@dataclass(frozen=True)
 class Scenario:
     name: str
     source: str  # file the scenario came from
@@ -179,6 +199,49 @@ class Scenario:
     rates: Rates = field(default_factory=Rates)
     camera_path: CameraPath | None = None
     segmentation: bool = True  # render the ground-truth segmentation image every frame
+    crowd: Crowd = field(default_factory=Crowd)
+    # the file's tables as read (ranges included): for_seed draws them again, with_values changes them
+    tables: dict | None = field(default=None, compare=False, repr=False)
+    drawn_seed: int | None = field(default=None, compare=False)  # the seed its ranges were drawn for
+
+    @property
+    def randomized(self) -> bool:
+        """Whether some of its values are ranges, drawn anew for each seed."""
+        return self.tables is not None and _has_ranges(self.tables)
+
+    def for_seed(self, seed: int) -> "Scenario":
+        """The scenario with its ranges drawn for ``seed`` (itself when it has none, or when they were
+        drawn for that seed)."""
+        if not self.randomized or int(seed) == self.drawn_seed:
+            return self
+        if _from_tables(self.tables, self.source, self.drawn_seed) != self:
+            raise ScenarioError(f"{self.source}: this scenario's values are drawn by the seed, and some were changed "
+                                f"after it was read (dataclasses.replace?): another seed's draw would lose them; "
+                                f"change it with Scenario.with_values instead")
+        return _from_tables(self.tables, self.source, int(seed))
+
+    def with_values(self, values: dict[str, Any]) -> "Scenario":
+        """The scenario with the given keys set, as if the file said so: {"crowd.sees_drone": True,
+        "duration": 30.0}. Keys are dotted paths of the file's tables; arrays of tables take an index
+        ("people.0.speed"). Checked like the file (ScenarioError naming the key)."""
+        if self.tables is None:
+            raise ScenarioError(f"{self.source}: this scenario was not read from a file; its values cannot be set")
+        tables = copy.deepcopy(self.tables)
+        for key, value in values.items():
+            node, parts = tables, key.split(".")
+            for i, part in enumerate(parts[:-1]):
+                if isinstance(node, list):
+                    if not part.isdigit() or int(part) >= len(node):
+                        raise ScenarioError(f"{self.source}: {key}: {'.'.join(parts[:i])} has no item {part!r}")
+                    node = node[int(part)]
+                else:
+                    node = node.setdefault(part, {})
+                if not isinstance(node, (dict, list)):
+                    raise ScenarioError(f"{self.source}: {key}: {'.'.join(parts[:i + 1])} is a value, not a table")
+            if isinstance(node, list):
+                raise ScenarioError(f"{self.source}: {key}: give an index into {'.'.join(parts[:-1])}")
+            node[parts[-1]] = value
+        return _from_tables(tables, self.source, None)
 
 
 # --------------------------------------------------------------------------- reading
@@ -303,21 +366,179 @@ def shipped_scenarios() -> list[str]:
     return sorted(s.stem for s in SCENARIO_DIR.glob("*.toml"))
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """Read and validate a scenario file (or a shipped scenario by name)."""
+def load_scenario(name_or_path: str | Path, seed: int | None = None) -> Scenario:
+    """Read and validate a scenario file (or a shipped scenario by name). Values given as ranges
+    are drawn for ``seed`` (default: the file's own seed); ``Scenario.for_seed`` draws another."""
     path = scenario_path(name_or_path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
-    return parse_scenario(text, source=str(path))
+    except UnicodeDecodeError as e:
+        raise ScenarioError(f"{path}: not a UTF-8 text file (byte {e.start}: {e.reason})") from None
+    return parse_scenario(text, source=str(path), seed=seed)
 
 
-def parse_scenario(text: str, source: str = "<string>") -> Scenario:
+def parse_scenario(text: str, source: str = "<string>", seed: int | None = None) -> Scenario:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{source}: not valid TOML: {e}") from None
+    return _from_tables(data, source, seed)
+
+
+# --------------------------------------------------------------------------- ranges drawn by the seed
+#
+# Any number in a scenario may be written as a range, drawn anew for every seed:
+#   speed = {uniform = [0.5, 1.6]}          a float drawn uniformly in [lo, hi]
+#   start_delay = {choice = [0.0, 2.0, 4.0]}  one of the listed values (numbers, strings or booleans)
+# or follow another value of the same draw, times a factor plus an offset (both optional):
+#   x = {same_as = "obstacles.0.center.0", times = 1.0, plus = 0.7}
+# Draws follow the file's order from a generator seeded by the episode's seed, so a seed always gives
+# the same scenario. A draw whose geometry fails the checks (a person starting inside an obstacle, ...)
+# is drawn again, up to _MAX_DRAWS times.
+
+_RANGE_KINDS = ("uniform", "choice", "same_as")
+_MAX_DRAWS = 100
+
+
+def _range_of(v: Any) -> str | None:
+    if not isinstance(v, dict) or not v:
+        return None
+    if "same_as" in v and set(v) <= {"same_as", "times", "plus"}:
+        return "same_as"
+    return next(iter(v)) if len(v) == 1 and next(iter(v)) in ("uniform", "choice") else None
+
+
+def _lookup(tables: Any, path: str) -> Any:
+    node = tables
+    for part in path.split("."):
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
+            return None
+    return node
+
+
+def _follow(tables: Any, drawn: Any, source: str, key: str = "") -> Any:
+    """Replace every {same_as = ...} by the value it names in ``drawn``, times and plus applied."""
+    if _range_of(tables) == "same_as":
+        v = _lookup(drawn, tables["same_as"])
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ScenarioError(f"{source}: {key}: same_as {tables['same_as']!r} does not name a number of the "
+                                f"scenario (got {v!r})")
+        return v * tables.get("times", 1.0) + tables.get("plus", 0.0)
+    if isinstance(tables, dict):
+        return {k: _follow(x, drawn, source, f"{key}.{k}" if key else k) for k, x in tables.items()}
+    if isinstance(tables, list):
+        return [_follow(x, drawn, source, f"{key}[{i}]") for i, x in enumerate(tables)]
+    return tables
+
+
+def _has_ranges(v: Any) -> bool:
+    if _range_of(v):
+        return True
+    if isinstance(v, dict):
+        return any(_has_ranges(x) for x in v.values())
+    if isinstance(v, list):
+        return any(_has_ranges(x) for x in v)
+    return False
+
+
+def _check_ranges(v: Any, source: str, key: str = "") -> None:
+    """Every range table well formed: uniform = [lo, hi] finite with lo <= hi; choice = a non-empty list."""
+    kind = _range_of(v)
+    if kind == "uniform":
+        r = v[kind]
+        if (not isinstance(r, list) or len(r) != 2
+                or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in r)):
+            raise ScenarioError(f"{source}: {key}: expected {{uniform = [lo, hi]}} with two finite numbers, got {r!r}")
+        if r[0] > r[1]:
+            raise ScenarioError(f"{source}: {key}: uniform range [{r[0]}, {r[1]}] has lo > hi")
+    elif kind == "choice":
+        r = v[kind]
+        if not isinstance(r, list) or not r or any(isinstance(x, (dict, list)) for x in r):
+            raise ScenarioError(f"{source}: {key}: expected {{choice = [a, b, ...]}} with at least one plain value, "
+                                f"got {r!r}")
+    elif kind == "same_as":
+        if not isinstance(v["same_as"], str):
+            raise ScenarioError(f"{source}: {key}: same_as must name a value, as \"obstacles.0.center.0\"")
+        for k in ("times", "plus"):
+            x = v.get(k, 0.0)
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                raise ScenarioError(f"{source}: {key}.{k}: expected a finite number, got {x!r}")
+    elif isinstance(v, dict):
+        for k, x in v.items():
+            _check_ranges(x, source, f"{key}.{k}" if key else k)
+    elif isinstance(v, list):
+        for i, x in enumerate(v):
+            _check_ranges(x, source, f"{key}[{i}]")
+
+
+def _longest_choice(v: Any) -> int:
+    if _range_of(v) == "choice":
+        return len(v["choice"])
+    if isinstance(v, dict):
+        return max((_longest_choice(x) for x in v.values()), default=0)
+    if isinstance(v, list):
+        return max((_longest_choice(x) for x in v), default=0)
+    return 0
+
+
+def _draw(v: Any, pick, source: str = "", root: Any = None) -> Any:
+    """The tables with every range replaced by pick(kind, values), then every same_as by what it names."""
+    if root is None:
+        drawn = _draw(v, pick, source, v)
+        return _follow(drawn, drawn, source)
+    kind = _range_of(v)
+    if kind == "same_as":
+        return v  # resolved once everything is drawn
+    if kind:
+        return pick(kind, v[kind])
+    if isinstance(v, dict):
+        return {k: _draw(x, pick, source, root) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_draw(x, pick, source, root) for x in v]
+    return v
+
+
+def _from_tables(data: dict, source: str, seed: int | None) -> Scenario:
+    if not _has_ranges(data):
+        return replace(_build(data, source), tables=data)
+    _check_ranges(data, source)
+    # Every value a range can give must pass the checks of its key: build with the ranges at both ends
+    # of every uniform range and at every value of every choice.
+    for i in range(max(2, _longest_choice(data))):
+        try:
+            _build(_draw(data, lambda kind, r, i=i: r[i % 2] if kind == "uniform" else r[min(i, len(r) - 1)],
+                         source), source, geometry=False)
+        except ScenarioError as e:
+            raise ScenarioError(f"{e} (a value one of the scenario's ranges can take)") from None
+    if seed is None:
+        seed = data.get("seed", 0)
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            seed = 0  # _build below reports the bad seed by name
+    rng = np.random.default_rng([int(seed), 0x5CE4A])
+
+    def pick(kind, r):
+        if kind == "uniform":
+            return float(rng.uniform(r[0], r[1]))
+        return r[int(rng.integers(len(r)))]
+
+    error = None
+    for _ in range(_MAX_DRAWS):
+        try:
+            sc = _build(_draw(data, pick, source), source)
+        except ScenarioError as e:
+            error = e
+            continue
+        return replace(sc, tables=data, drawn_seed=int(seed))
+    raise ScenarioError(f"{error} (seed {seed}: no draw of the scenario's ranges passed the checks in {_MAX_DRAWS} tries)")
+
+
+def _build(data: dict, source: str, geometry: bool = True) -> Scenario:
     top = _Section(data, "", source)
     name = top.string("name", Path(source).stem)
     seed = top.number("seed", 0, lo=0, integer=True)
@@ -332,13 +553,15 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     camera = _read_camera(top.sub("camera"))
     noise = _read_noise(top.sub("noise"))
     rates = _read_rates(top.sub("rates"))
+    crowd = _read_crowd(top.sub("crowd"))
     camera_path = _read_camera_path(top.sub("camera_path")) if top.has("camera_path") else None
     top.done()
 
     sc = Scenario(name=name, source=source, seed=seed, duration=duration, description=description,
                   corridor=corridor, obstacles=obstacles, people=people, drone=drone, camera=camera,
-                  noise=noise, rates=rates, camera_path=camera_path, segmentation=segmentation)
-    _check_geometry(sc, top)
+                  noise=noise, rates=rates, camera_path=camera_path, segmentation=segmentation, crowd=crowd)
+    if geometry:
+        _check_geometry(sc, top)
     return sc
 
 
@@ -399,8 +622,24 @@ def _read_person(s: _Section) -> Person:
         kw["center"] = s.vector("center", 2, required=True)
         kw["radius"] = s.number("radius", lo=0.3, hi=20.0)
         kw["clockwise"] = s.boolean("clockwise", False)
+    if s.has("sees_drone"):
+        kw["sees_drone"] = s.boolean("sees_drone", False)
     s.done()
     return Person(**kw)
+
+
+def _read_crowd(s: _Section) -> Crowd:
+    d = Crowd()
+    c = Crowd(sees_drone=s.boolean("sees_drone", d.sees_drone),
+              relaxation_time=s.number("relaxation_time", d.relaxation_time, lo=0.05, hi=10.0),
+              strength=s.number("strength", d.strength, lo=0.0, hi=100.0),
+              range=s.number("range", d.range, lo=0.01, hi=5.0),
+              step_time=s.number("step_time", d.step_time, lo=0.0, hi=10.0),
+              view_angle=math.radians(s.number("view_angle_deg", math.degrees(d.view_angle), lo=0.0, hi=180.0)),
+              behind_weight=s.number("behind_weight", d.behind_weight, lo=0.0, hi=1.0),
+              max_speed_factor=s.number("max_speed_factor", d.max_speed_factor, lo=1.0, hi=3.0))
+    s.done()
+    return c
 
 
 def _read_drone(s: _Section) -> Drone:

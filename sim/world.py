@@ -33,6 +33,7 @@ with quiet_stdout():  # PyBullet prints its build time on import
 from dodt.frames import CameraIntrinsics, SensorFrame
 from sim.camera import decode_render, load_egl, render_buffers
 from sim.controller import CascadedController, DroneState, Reference
+from sim.crowd import Crowd
 from sim.depth_noise import DepthNoiseModel
 from sim.ground_truth import STRUCTURE_ID, CollisionEvent, GroundTruth, ObstacleTruth
 from sim.people import HUMANOID_URDF, Walker, person_height, plan_path
@@ -109,10 +110,11 @@ class World:
         self.render_process = bool(render_process)
         self._render_proc = None
         self.light_direction = light_direction
-        self.scenario = scenario
         self.camera_on = camera
         self.render_on = bool(render)
         self.seed = scenario.seed if seed is None else int(seed)
+        self._template = scenario  # a scenario with ranges is drawn anew for every seed (Scenario.for_seed)
+        self.scenario = scenario = scenario.for_seed(self.seed)
         self.requested_renderer = renderer or scenario.camera.renderer
         self.segmentation_on = scenario.segmentation if segmentation is None else segmentation
         self.vehicle = load_vehicle()
@@ -140,6 +142,7 @@ class World:
         """Rebuild the world from scratch (bit-identical for the same scenario and seed)."""
         if seed is not None:
             self.seed = int(seed)
+            self.scenario = self._template.for_seed(self.seed)
         self.close()
         ss = np.random.SeedSequence(self.seed)
         rng_paths, rng_looks, self._rng_noise, self._rng_odom = (np.random.default_rng(s) for s in ss.spawn(4))
@@ -191,6 +194,8 @@ class World:
             self._build_person(w, person, rng_looks)
             self.walkers.append(w)
             self.person_ids.append(len(sc.obstacles) + 1 + i)
+        h = self.vehicle.collision_size / 2
+        self.crowd = Crowd(self.walkers, sc, drone_radius=float(math.hypot(h[0], h[1])))
         self._build_drone()
 
         # Segmentation: PyBullet body uid -> obstacle id.
@@ -230,8 +235,7 @@ class World:
         if self._camera_path is not None:
             pos, vel, yaw = self._camera_path(0.0)
             self._set_body_pose(pos, vel, yaw)
-        for w in self.walkers:
-            w.apply(p, 0.0)
+        self._pose_people()
         p.performCollisionDetection(physicsClientId=self._client)
         self._update_clearance()
         self._check_contacts()
@@ -398,16 +402,17 @@ class World:
                 return pos, vel, float(np.interp(t, t_k, yaw_k))
             return at
 
-        walker = self.walkers[cp.follow_person]
-        path = walker.path
+        i = cp.follow_person
+        path = self.walkers[i].path
+        crowd = self.crowd  # not self: a closure over the World would keep it (and its EGL context) alive
 
         def follow(t):
-            # Walk the person's own trail, follow_distance behind, looking at the person.
-            s = path.distance(t)
+            # Walk the person's route, follow_distance behind the point the person has reached, looking at
+            # the person (as the crowd has moved it, at the latest control period).
+            s = crowd.progress[i]
             xy = path.trail_point(s - cp.follow_distance)
-            target = path.point_at(s)
-            moving = path.start_delay <= t and s < path.length
-            v = path.velocity(t) if moving else np.zeros(2)
+            target = crowd.pos[i]
+            v = crowd.vel[i]
             d = target - xy
             yaw = math.atan2(d[1], d[0])
             return np.array([xy[0], xy[1], cp.follow_height]), np.array([v[0], v[1], 0.0]), yaw
@@ -516,8 +521,11 @@ class World:
         self.step_count += 1
         self.time = self.step_count * self.dt
         if self.step_count % self.steps_per_control == 0:
-            for w in self.walkers:
-                w.apply(p, self.time)
+            if len(self.crowd):
+                pos, _ = self._drone_pose()
+                lin, _ = p.getBaseVelocity(self.drone, physicsClientId=self._client)
+                self.crowd.step(self.time, self.dt * self.steps_per_control, pos[:2], lin[:2])
+                self._pose_people()
             self._update_clearance()
         self._check_contacts()
 
@@ -529,21 +537,33 @@ class World:
 
     def _check_contacts(self) -> None:
         """Collision events: static world from the physics contacts, people from the query
-        client whenever the drone is close to one."""
-        touching: set[int] = {cp_[2] for cp_ in p.getContactPoints(bodyA=self.drone, physicsClientId=self._client)}
+        client whenever the drone is close to one. Each event keeps the drone's velocity, the
+        point of the other body nearest the drone and that body's velocity (experiments.fault)."""
+        points: dict[int, tuple] = {}
+        for cp_ in p.getContactPoints(bodyA=self.drone, physicsClientId=self._client):
+            points.setdefault(cp_[2], cp_[6])  # positionOnB
         if self._person_clearance < 0.3:
             pos, quat = self._drone_pose()
             p.resetBasePositionAndOrientation(self._drone_proxy, pos, quat, physicsClientId=self._query_client)
             for w, oid in zip(self.walkers, self.person_ids):
-                if p.getClosestPoints(self._drone_proxy, w.bodies[1][1], 0.0, physicsClientId=self._query_client):
-                    touching.add(-oid)  # negative: person ids, apart from PyBullet uids
-        for uid in touching - self._in_contact:
-            if uid < 0:
-                oid, kind = -uid, "person"
-            else:
-                oid = int(self._seg_lut[uid + 1]) if uid + 1 < len(self._seg_lut) else STRUCTURE_ID
-                kind = "structure" if oid == STRUCTURE_ID else "static"
-            self.collisions.append(CollisionEvent(self.time, oid, kind, tuple(self._drone_pose()[0])))
+                hits = p.getClosestPoints(self._drone_proxy, w.bodies[1][1], 0.0, physicsClientId=self._query_client)
+                if hits:
+                    points[-oid] = min(hits, key=lambda h: h[8])[6]  # negative: person ids, apart from uids
+        touching = set(points)
+        new = touching - self._in_contact
+        if new:
+            pos = tuple(self._drone_pose()[0])
+            lin, _ = p.getBaseVelocity(self.drone, physicsClientId=self._client)
+            for uid in sorted(new):
+                other_v = (0.0, 0.0, 0.0)
+                if uid < 0:
+                    oid, kind = -uid, "person"
+                    other_v = tuple(self.crowd.velocity3(self.person_ids.index(oid)))
+                else:
+                    oid = int(self._seg_lut[uid + 1]) if uid + 1 < len(self._seg_lut) else STRUCTURE_ID
+                    kind = "structure" if oid == STRUCTURE_ID else "static"
+                self.collisions.append(CollisionEvent(self.time, oid, kind, pos, tuple(lin),
+                                                      tuple(points[uid]), other_v))
         self._in_contact = touching
 
     def _update_clearance(self) -> None:
@@ -570,8 +590,8 @@ class World:
                     clear["static"] = min(clear["static"], max(min(x[8] for x in pts), 0.0))
         proxy_posed = False
         reach = self.vehicle.radius + CLEARANCE_CAP
-        for w in self.walkers:
-            root = w.path.position(self.time)
+        for i, w in enumerate(self.walkers):
+            root = self.crowd.pos[i]
             if math.hypot(root[0] - pos[0], root[1] - pos[1]) - _PERSON_REACH * w.height > reach:
                 continue
             if not proxy_posed:
@@ -634,7 +654,11 @@ class World:
 
     def people_poses(self) -> list:
         """Every person's pose now (sim.people.WalkerPose), as the renderer draws them."""
-        return [w.pose_at(self.time) for w in self.walkers]
+        return self.crowd.poses()
+
+    def _pose_people(self) -> None:
+        for w, pose in zip(self.walkers, self.crowd.poses()):
+            w.apply_pose(p, pose)
 
     def render_at(self, pos, quat, people) -> tuple:
         """Pose the drone at (pos, quat) and the people at their ``people_poses`` and render: the
@@ -683,15 +707,14 @@ class World:
             if b.obstacle_id != STRUCTURE_ID:
                 out.append(ObstacleTruth(b.obstacle_id, "static", labels[b.obstacle_id], b.aabb_min.copy(),
                                          b.aabb_max.copy(), np.zeros(3)))
-        for w, oid in zip(self.walkers, self.person_ids):
+        for i, (w, oid) in enumerate(zip(self.walkers, self.person_ids)):
             cid, body = w.bodies[1]  # the query client holds the collidable, posed copy
             lo, hi = np.array(p.getAABB(body, -1, physicsClientId=cid))
             for link in range(p.getNumJoints(body, physicsClientId=cid)):
                 a, b = p.getAABB(body, link, physicsClientId=cid)
                 lo, hi = np.minimum(lo, a), np.maximum(hi, b)
             lo[2] = max(lo[2], 0.0)
-            v = w.path.velocity(self.time)
-            out.append(ObstacleTruth(oid, "person", "person", lo, hi, np.array([v[0], v[1], 0.0])))
+            out.append(ObstacleTruth(oid, "person", "person", lo, hi, self.crowd.velocity3(i)))
         return tuple(out)
 
     def latest_frame(self) -> SensorFrame:

@@ -31,12 +31,10 @@ def _same(a, b):
 
 
 def test_two_runs_with_one_seed_are_identical_and_another_seed_differs():
-    import dataclasses
 
     sc = load_scenario("corridor")
     # odometry noise on as well, so every random stream is exercised
-    sc = dataclasses.replace(sc, noise=dataclasses.replace(sc.noise, odom_position_std=0.01, odom_rotation_std=0.002),
-                             segmentation=True)
+    sc = sc.with_values({"noise.odom_position_std": 0.01, "noise.odom_rotation_std": 0.002, "segmentation": True})
     a = _run(World(sc, seed=5))
     b = _run(World(sc, seed=5))
     _same(a, b)

@@ -32,9 +32,10 @@ def test_people_follow_their_path_at_their_set_speed(speed):
     b, tb = _base_xy(w), w.time
     measured = np.linalg.norm(b - a) / (tb - ta)  # the animated body, not the path
     assert measured == pytest.approx(speed, rel=0.05)
-    # and the body stays on the path (the root sways a few centimetres with the gait)
-    assert np.linalg.norm(b - path.position(tb)) < 0.08
+    # and the body stays on the path (the root sways a few centimetres with the gait), near where its
+    # schedule would have it: the crowd model steers along the route, relaxing toward its speed
     assert abs(b[1] - (-1.0)) < 0.08
+    assert np.linalg.norm(b - path.position(tb)) < 0.15
 
 
 def test_crossing_stops_at_the_end_and_start_delay_holds():
@@ -42,9 +43,9 @@ def test_crossing_stops_at_the_end_and_start_delay_holds():
     start = _base_xy(w)
     w.advance(0.9)
     assert np.linalg.norm(_base_xy(w) - start) < 0.05  # still standing
-    w.advance(4.0)
+    w.advance(6.0)
     assert np.linalg.norm(_base_xy(w) - [4.0, 0.0]) < 0.08
-    np.testing.assert_array_equal(w.walkers[0].path.velocity(w.time), [0.0, 0.0])
+    np.testing.assert_allclose(w.crowd.vel[0], [0.0, 0.0], atol=0.02)
 
 
 def test_people_face_where_they_walk():
@@ -56,7 +57,7 @@ def test_people_face_where_they_walk():
     ahead = []
     for _ in range(40):
         w.advance(0.4)
-        v = w.walkers[0].path.velocity(w.time)
+        v = w.crowd.vel[0]
         d = v / np.linalg.norm(v)
         for ankle in (11, 14):
             joint = np.array(p.getLinkState(body, ankle, physicsClientId=cid)[4][:2])
@@ -124,7 +125,7 @@ def test_collision_geometry_follows_the_animated_body():
             b = p.getLinkState(b1, link, physicsClientId=c1)[4]
             np.testing.assert_allclose(a, b, atol=1e-9)  # rendered body == collidable body
         lo, hi = p.getAABB(b1, 10, physicsClientId=c1)  # a knee moves with the walk
-        assert abs((lo[0] + hi[0]) / 2 - w.walkers[0].path.position(w.time)[0]) < 0.6
+        assert abs((lo[0] + hi[0]) / 2 - w.crowd.pos[0, 0]) < 0.6
 
 
 def test_random_walk_stays_in_its_region_avoids_obstacles_and_is_seeded():

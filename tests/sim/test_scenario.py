@@ -11,8 +11,10 @@ import math
 import re
 from typing import Any
 
+import numpy as np
 import pytest
 
+from conftest import make_scenario
 from sim.scenario import (
     Scenario,
     ScenarioError,
@@ -791,3 +793,102 @@ def test_camera_keyframes_through_an_obstacle():
 
 def test_keyframes_error_names_their_fields():
     assert_error({"camera_path": {"keyframes": []}}, "camera_path.keyframes", "[t, x, y, z, yaw_deg]")
+
+
+# --------------------------------------------------------------------------- values drawn by the seed
+
+FAMILIES = ("corridor", "corridor4", "crossing", "head_on", "step_out", "overtaking", "static_clutter")
+
+
+def test_ranges_are_drawn_per_seed_within_their_bounds_and_repeat_for_a_seed():
+    sc = make_scenario('[[people]]\nbehaviour = "crossing"\nspeed = {uniform = [0.5, 1.6]}\n'
+                       'start_delay = {choice = [0.0, 2.0]}\n'
+                       'waypoints = [[{uniform = [2.0, 3.0]}, 0.0], [{same_as = "people.0.waypoints.0.0", plus = 4.0}, 1.0]]\n')
+    assert sc.randomized
+    draws = [sc.for_seed(s) for s in range(30)]
+    speeds = [d.people[0].speed for d in draws]
+    assert all(0.5 <= v <= 1.6 for v in speeds) and len(set(speeds)) == 30
+    assert {d.people[0].start_delay for d in draws} == {0.0, 2.0}
+    for d in draws:
+        (x0, _), (x1, _) = d.people[0].waypoints
+        assert 2.0 <= x0 <= 3.0 and x1 == pytest.approx(x0 + 4.0)
+    assert sc.for_seed(7) == sc.for_seed(7) and sc.for_seed(7) != sc.for_seed(8)
+
+
+@pytest.mark.parametrize("value,message", [
+    ("{uniform = [1.0]}", "speed: expected {uniform = [lo, hi]} with two finite numbers"),
+    ("{uniform = [1.2, 0.8]}", "speed: uniform range [1.2, 0.8] has lo > hi"),
+    ("{uniform = [0.8, nan]}", "speed: expected {uniform = [lo, hi]} with two finite numbers"),
+    ("{choice = []}", "speed: expected {choice = [a, b, ...]}"),
+    ("{uniform = [0.8, 2.5]}", "people[0].speed: must be <= 1.6, got 2.5 (a value one of the scenario's ranges can take)"),
+    ("{choice = [0.8, 0.2]}", "people[0].speed: must be >= 0.5, got 0.2"),
+    ('{same_as = "people.0.nothing"}', "same_as 'people.0.nothing' does not name a number"),
+    ('{same_as = "people.0.speed", times = "2"}', "speed.times: expected a finite number"),
+])
+def test_bad_ranges_are_refused_naming_the_key(value, message):
+    with pytest.raises(ScenarioError) as e:
+        make_scenario(f'[[people]]\nbehaviour = "crossing"\nspeed = {value}\nwaypoints = [[2.0, 0.0], [4.0, 0.0]]\n')
+    assert "test.toml" in str(e.value) and message in str(e.value)
+
+
+def test_a_draw_that_fails_the_geometry_checks_is_drawn_again():
+    # Half of the starts fall inside the box: every seed still gives a person starting outside it.
+    sc = make_scenario('[[obstacles]]\nkind = "box"\ncenter = [5.0, 0.0]\nsize = [1.0, 1.0, 1.0]\n'
+                       '[[people]]\nbehaviour = "crossing"\nspeed = 1.0\n'
+                       'waypoints = [[{uniform = [4.0, 6.0]}, 1.5], [{uniform = [4.0, 6.0]}, {uniform = [-1.0, 1.0]}]]\n')
+    ends = [sc.for_seed(s).people[0].waypoints[1] for s in range(20)]
+    assert all(not sc.obstacles[0].footprint_contains(np.array(e), 0.25)[0] for e in ends)
+
+
+def test_a_range_that_can_never_pass_the_checks_is_refused_naming_the_seed():
+    with pytest.raises(ScenarioError, match=r"people\[0\].waypoints: the person starts inside obstacles\[0\] \(box\) "
+                                            r"\(seed 0: no draw of the scenario's ranges passed the checks"):
+        make_scenario('[[obstacles]]\nkind = "box"\ncenter = [5.0, 0.0]\nsize = [1.0, 1.0, 1.0]\n'
+                      '[[people]]\nbehaviour = "crossing"\nspeed = 1.0\n'
+                      'waypoints = [[{uniform = [4.9, 5.1]}, 0.0], [8.0, 0.0]]\n')  # drawn for the file's seed
+
+
+def test_with_values_sets_keys_as_the_file_would_and_checks_them():
+    sc = load_scenario("corridor")
+    seen = sc.with_values({"crowd.sees_drone": True, "people.1.speed": 1.1, "duration": 30.0})
+    assert seen.crowd.sees_drone and seen.duration == 30.0
+    assert all(p.speed == 1.1 for p in (seen.for_seed(s).people[1] for s in range(3)))  # a range replaced
+    with pytest.raises(ScenarioError, match="crowd.bogus: unknown key"):
+        sc.with_values({"crowd.bogus": 1})
+    with pytest.raises(ScenarioError, match="people.9.speed: people has no item '9'"):
+        sc.with_values({"people.9.speed": 1.0})
+    with pytest.raises(ScenarioError, match=r"crowd.sees_drone: expected true or false"):
+        sc.with_values({"crowd.sees_drone": "yes"})
+
+
+def test_a_drawn_scenario_changed_behind_its_back_is_refused_for_another_seed():
+    import dataclasses
+
+    sc = dataclasses.replace(load_scenario("corridor"), duration=5.0)
+    assert sc.for_seed(sc.drawn_seed) is sc  # its own seed: itself
+    with pytest.raises(ScenarioError, match="with Scenario.with_values instead"):
+        sc.for_seed(sc.drawn_seed + 1)
+
+
+@pytest.mark.parametrize("table,message", [
+    ("sees_drone = 1", "crowd.sees_drone: expected true or false"),
+    ("relaxation_time = 0.0", "crowd.relaxation_time: must be >= 0.05"),
+    ("strength = -1.0", "crowd.strength: must be >= 0.0"),
+    ("view_angle_deg = 270.0", "crowd.view_angle_deg: must be <= 180.0"),
+    ("stregth = 2.0", "crowd.stregth: unknown key"),
+])
+def test_crowd_settings_are_checked(table, message):
+    with pytest.raises(ScenarioError, match=message):
+        make_scenario(f"[crowd]\n{table}\n")
+
+
+@pytest.mark.parametrize("name", FAMILIES)
+def test_the_shipped_families_differ_by_seed_as_situations(name):
+    sc = load_scenario(name)
+    assert sc.randomized
+    draws = [sc.for_seed(s) for s in range(5)]
+    layouts = {tuple(o.center for o in d.obstacles) for d in draws}
+    people = {tuple((p.speed, p.start_delay) for p in d.people) for d in draws}
+    assert len(layouts) == 5 and (not sc.people or len(people) == 5)
+    for d in draws:
+        assert all(0.5 <= p.speed <= 1.6 for p in d.people)
