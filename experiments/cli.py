@@ -196,8 +196,10 @@ def _cmd_sweep(args) -> int:
     if args.jobs < 1:
         raise UserError("--jobs: must be >= 1")
     _check_frame_latency(args.frame_latency)
-    if args.max_collision_rate is not None and not 0.0 <= args.max_collision_rate <= 1.0:
-        raise UserError("--max-collision-rate: must be a fraction between 0 and 1")
+    for name in ("max_collision_rate", "max_at_fault_rate"):
+        v = getattr(args, name)
+        if v is not None and not 0.0 <= v <= 1.0:
+            raise UserError(f"--{name.replace('_', '-')}: must be a fraction between 0 and 1")
     try:
         seeds = sweep.parse_seeds(args.seeds)
         cfg = sweep.EpisodeConfig(static_map=args.map, frame_latency=args.frame_latency)
@@ -206,20 +208,26 @@ def _cmd_sweep(args) -> int:
     except sweep.SweepError as e:
         raise UserError(str(e)) from None
     r = agg["rates"]
-    print(f"{agg['scenario']} / {agg['perception']}: {agg['episodes']} episodes; success "
-          f"{100 * r['success']['rate']:.1f} % [{100 * r['success']['ci95'][0]:.1f}, {100 * r['success']['ci95'][1]:.1f}], "
-          f"collision {100 * r['collision']['rate']:.1f} % [{100 * r['collision']['ci95'][0]:.1f}, "
-          f"{100 * r['collision']['ci95'][1]:.1f}], timeout {100 * r['timeout']['rate']:.1f} %")
+
+    def rate(k):
+        return f"{100 * r[k]['rate']:.1f} % [{100 * r[k]['ci95'][0]:.1f}, {100 * r[k]['ci95'][1]:.1f}]"
+
+    print(f"{agg['scenario']} / {agg['perception']}: {agg['episodes']} episodes; success {rate('success')}, "
+          f"at-fault collision {rate('at_fault')}, only not-at-fault collisions {rate('not_at_fault_only')}, "
+          f"timeout {rate('timeout')}")
     print(f"wrote {args.out}/summary.json, {args.out}/summary.md")
     if args.junit:
         by_seed = sweep.read_results(Path(args.out) / sweep.RESULTS)
         Path(args.junit).write_text(sweep.junit(agg, by_seed))
         print(f"wrote {args.junit}")
-    if args.max_collision_rate is not None and r["collision"]["rate"] > args.max_collision_rate:
-        print(f"collision rate {r['collision']['rate']:.4f} exceeds --max-collision-rate {args.max_collision_rate}",
-              file=sys.stderr)
-        return 1
-    return 0
+    status = 0
+    for key, limit in (("collision", args.max_collision_rate), ("at_fault", args.max_at_fault_rate)):
+        if limit is not None and r[key]["rate"] > limit:
+            what = "at-fault collision" if key == "at_fault" else "collision"
+            print(f"{what} rate {r[key]['rate']:.4f} exceeds --max-{key.replace('_', '-')}-rate {limit}",
+                  file=sys.stderr)
+            status = 1
+    return status
 
 
 def _cmd_compare(args) -> int:
@@ -456,7 +464,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
     w.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
     w.add_argument("--max-collision-rate", type=float, default=None,
-                   help="exit with status 1 when the collision rate exceeds this fraction")
+                   help="exit with status 1 when the rate of episodes with any collision exceeds this fraction")
+    w.add_argument("--max-at-fault-rate", type=float, default=None,
+                   help="exit with status 1 when the rate of episodes with an at-fault collision exceeds this fraction")
     w.add_argument("--junit", default=None, help="write JUnit XML, one test case per seed")
     w.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
     w.add_argument("--keep-logs", action="store_true", help="keep the episode logs of successful episodes too")

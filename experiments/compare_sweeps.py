@@ -34,7 +34,7 @@ class SweepComparison:
     to_success: tuple[int, ...]  # failed in the baseline, succeeded with the change
     to_failure: tuple[tuple[int, str], ...]  # (seed, the change's failure reason)
     p_value: float  # two-sided exact sign test on the discordant seeds
-    counts: dict  # {"collision": (base, new), "timeout": (base, new)}
+    counts: dict  # {"at-fault collision": (base, new), ..., "collision": ..., "timeout": ...}
     median_speed: tuple[float | None, float | None]  # of the successful episodes, m/s
     only_in_base: int = 0
     only_in_new: int = 0
@@ -118,8 +118,10 @@ def compare_sweeps(base: str | Path, new: str | Path) -> SweepComparison:
     ok_b = {s: bool(b[s].get("success")) for s in common}
     up = tuple(s for s in common if ok_b[s] and not ok_a[s])
     down = tuple((s, str(b[s].get("failure_reason") or "failed")) for s in common if ok_a[s] and not ok_b[s])
-    counts = {k: (sum(bool(a[s].get(f)) for s in common), sum(bool(b[s].get(f)) for s in common))
-              for k, f in (("collision", "collided"), ("timeout", "timeout"))}
+    counts = {k: (sum(bool(a[s].get(f, a[s].get("collided") if f == "at_fault" else False)) for s in common),
+                  sum(bool(b[s].get(f, b[s].get("collided") if f == "at_fault" else False)) for s in common))
+              for k, f in (("at-fault collision", "at_fault"), ("only not-at-fault collisions", "not_at_fault_only"),
+                           ("collision", "collided"), ("timeout", "timeout"))}
     return SweepComparison(
         base=str(base), new=str(new), seeds=tuple(common), base_success=sum(ok_a.values()),
         new_success=sum(ok_b.values()), to_success=up, to_failure=down,

@@ -147,6 +147,7 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     """
     sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
     seed = sc.seed if seed is None else int(seed)
+    sc = sc.for_seed(seed)  # a scenario with ranges: this seed's draw
     perc = make_perception(perception) if isinstance(perception, str) else perception
     if cfg.static_map not in STATIC_MAPS:
         raise ValueError(f"static_map: {cfg.static_map!r} is not one of {', '.join(STATIC_MAPS)}")
@@ -298,7 +299,9 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                  "r": r4(p_ref), "c": [round(min(x, 9.0), 4) for x in cl[1:]]})
         for ev in world.collisions[n_collisions:]:
             log.add({"k": "collision", "t": round(ev.time, 5), "kind": ev.other_kind, "other_id": ev.other_id,
-                     "position": r4(ev.position)})
+                     "position": r4(ev.position), "v": r4(ev.drone_velocity),
+                     "point": None if ev.contact_point is None else r4(ev.contact_point),
+                     "other_v": r4(ev.other_velocity)})
         n_collisions = len(world.collisions)
 
     log.add({"k": "end", "t": round(world.time, 5), "reason": reason, "reached_goal": reason == "goal",

@@ -13,7 +13,9 @@ Record kinds (field ``k``):
   starting at the current position), path (the global path, (K, 2), or None), n_obst.
 - ``map`` (every ``map_snapshot_period``): voxels = occupied voxel indices above the floor; centre =
   map_origin + (index + 0.5) * map_resolution.
-- ``collision``: t, kind (person | static | structure), other_id, position.
+- ``collision``: t, kind (person | static | structure), other_id, position (the drone's), v (the
+  drone's velocity), point (the point of the other body nearest the drone), other_v (the other
+  body's velocity): what experiments.fault classes the collision by.
 - ``end``: t, reason (goal | timeout | crashed), reached_goal, time_to_goal.
 
 Metrics and viewers read this file after the run (``read_log``); nothing computed during the

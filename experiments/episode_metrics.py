@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 
+from experiments.fault import at_fault, classify
+
 
 def timing_stats(values) -> dict:
     """n, median, p95, p99, max of the finite values (rounded to 1e-3); {'n': 0} when there are none."""
@@ -40,8 +42,17 @@ def summarize(records: list[dict]) -> dict:
     time_to_goal = end.get("time_to_goal") if reached else None
     flown = time_to_goal if reached else t_end
     collided = bool(collisions)
+    rows = []
+    for c in collisions:
+        v = c.get("v")
+        cls = classify(c["kind"], c["position"], v if v is not None else [math.nan] * 3, c.get("point"))
+        rows.append({"t": c["t"], "kind": c["kind"], "other_id": c["other_id"], "fault": cls,
+                     "drone_speed": None if v is None else round(float(np.linalg.norm(v)), 3)})
+    n_at_fault = sum(at_fault(r["fault"]) for r in rows)
     failure = None  # a collision is named first: an episode that collided and then timed out failed by colliding
-    if collided:
+    if n_at_fault:
+        failure = "at_fault_collision"
+    elif collided:
         failure = "collision"
     elif end and end.get("reason") not in (None, "goal"):
         failure = end["reason"]
@@ -52,7 +63,10 @@ def summarize(records: list[dict]) -> dict:
         "frame_latency": header.get("frame_latency", 0),
         "success": reached and not collided,
         "reached_goal": reached, "collided": collided, "collision_count": len(collisions),
-        "collisions": [{"t": c["t"], "kind": c["kind"], "other_id": c["other_id"]} for c in collisions],
+        "collisions": rows,
+        # experiments.fault: an at-fault collision is the drone's; an episode with only not-at-fault ones was hit
+        "at_fault": n_at_fault > 0, "at_fault_count": n_at_fault,
+        "not_at_fault_only": collided and n_at_fault == 0,
         "timeout": bool(end and end.get("reason") == "timeout"),
         "failure_reason": failure,
         "time_to_goal": None if time_to_goal is None else round(time_to_goal, 3),

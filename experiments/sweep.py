@@ -265,14 +265,41 @@ def describe_environment(env: dict) -> str:
             + (f" (Mesa {env['mesa']})" if env.get("mesa") else "") + (f"; set: {over}" if over else ""))
 
 
+# Episode outcomes counted by a sweep: each an indicator of every episode (they overlap: a timeout may
+# have had a collision), with its rate and 95 % Wilson interval. experiments.fault says what is at fault.
+OUTCOMES = {
+    "success": lambda s: s["success"],  # goal reached, no collision of any kind
+    "at_fault_free": lambda s: not s.get("at_fault", s["collided"]),
+    "at_fault": lambda s: s.get("at_fault", s["collided"]),  # at least one collision the drone caused
+    "not_at_fault_only": lambda s: s.get("not_at_fault_only", False),  # hit, but never at fault
+    "collision": lambda s: s["collided"],  # any collision
+    "timeout": lambda s: s["timeout"],
+}
+
+
+def rates_of(summaries: list[dict]) -> dict:
+    n = len(summaries)
+    counts = {k: sum(bool(f(s)) for s in summaries) for k, f in OUTCOMES.items()}
+    return {k: {"count": c, "rate": round(c / n, 4) if n else 0.0,
+                "ci95": [round(x, 4) for x in wilson(c, n)]} for k, c in counts.items()}
+
+
+def contact_speeds(summaries: list[dict]) -> dict:
+    """The drone's speed at each collision, by fault class: {class: [m/s, ...]}."""
+    out: dict[str, list] = {}
+    for s in summaries:
+        for c in s.get("collisions", []):
+            if c.get("drone_speed") is not None:
+                out.setdefault(c.get("fault", "unclassified"), []).append(c["drone_speed"])
+    return {k: sorted(v) for k, v in sorted(out.items())}
+
+
 def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
     n = len(summaries)
-    counts = {"success": sum(s["success"] for s in summaries), "collision": sum(s["collided"] for s in summaries),
-              "timeout": sum(s["timeout"] for s in summaries)}
-    rates = {k: {"count": c, "rate": round(c / n, 4) if n else 0.0,
-                 "ci95": [round(x, 4) for x in wilson(c, n)]} for k, c in counts.items()}
+    rates = rates_of(summaries)
     return {
         "scenario": scenario, "perception": perception, "episodes": n, "rates": rates,
+        "contact_speeds": contact_speeds(summaries),
         "time_to_goal": _dist(s["time_to_goal"] for s in summaries),
         "mean_speed": _dist(s["mean_speed"] for s in summaries if s["reached_goal"]),
         "min_clearance_person": _dist(s["min_clearance"]["person"] for s in summaries),
@@ -282,6 +309,8 @@ def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
         "environments": distinct(s.get("environment") for s in summaries),
         "per_seed": [{"seed": s["seed"], "success": s["success"], "collided": s["collided"],
                       "collisions": s["collision_count"], "timeout": s["timeout"],
+                      "at_fault": s.get("at_fault", s["collided"]),
+                      "faults": [c.get("fault", "unclassified") for c in s.get("collisions", [])],
                       "failure_reason": s["failure_reason"], "time_to_goal": s["time_to_goal"],
                       "min_clearance": s["min_clearance"]["overall"]} for s in sorted(summaries, key=lambda s: s["seed"])],
     }
@@ -299,17 +328,23 @@ def markdown(agg: dict) -> str:
         d = agg[key]
         if d["n"]:
             L.append(f"| {label} | {d['n']} | {d['mean']} | {d['p5']} | {d['median']} | {d['p95']} | {d['max']} |")
+    speeds = agg.get("contact_speeds") or {}
+    if speeds:
+        L += ["", "| collisions by fault | count | drone speed at contact [m/s] |", "|---|---|---|"]
+        for k, v in speeds.items():
+            L.append(f"| {k} | {len(v)} | {', '.join(f'{x:.2f}' for x in v)} |")
     L += ["", f"Planner fallbacks over all episodes: {agg['planner_fallbacks']}", ""]
     envs = agg.get("environments", [])
     if envs:
         L += [("Environment: " if len(envs) == 1 else f"Environments ({len(envs)}, outcomes may differ between them): ")
               + "; ".join(describe_environment(e) for e in envs), ""]
-    L += ["| seed | outcome | collisions | time to goal [s] | min clearance [m] |", "|---|---|---|---|---|"]
+    L += ["| seed | outcome | collisions (fault) | time to goal [s] | min clearance [m] |", "|---|---|---|---|---|"]
     for s in agg["per_seed"]:
         outcome = "success" if s["success"] else (s["failure_reason"] or "failure")
         ttg = "-" if s["time_to_goal"] is None else f"{s['time_to_goal']:.2f}"
         mc = "-" if s["min_clearance"] is None else f"{s['min_clearance']:.2f}"
-        L.append(f"| {s['seed']} | {outcome} | {s['collisions']} | {ttg} | {mc} |")
+        faults = ", ".join(s.get("faults") or [])
+        L.append(f"| {s['seed']} | {outcome} | {s['collisions']}{f' ({faults})' if faults else ''} | {ttg} | {mc} |")
     return "\n".join(L) + "\n"
 
 
@@ -324,7 +359,9 @@ def junit(agg: dict, summaries_by_seed: dict[int, dict]) -> str:
         body = ""
         if not row["success"]:
             failures += 1
-            msg = f"{row['failure_reason'] or 'failure'}: {row['collisions']} collision(s)"
+            faults = ", ".join(row.get("faults") or [])
+            msg = (f"{row['failure_reason'] or 'failure'}: {row['collisions']} collision(s)"
+                   + (f" ({faults})" if faults else ""))
             detail = json.dumps({k: s.get(k) for k in ("collisions", "min_clearance", "time_to_goal", "sim_time")})
             body = f"<failure message={quoteattr(msg)}>{escape(detail)}</failure>"
         cls = quoteattr(f"{agg['scenario']}.{agg['perception']}")

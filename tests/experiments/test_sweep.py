@@ -399,7 +399,8 @@ def test_summary_files_hold_the_rates_table_and_one_row_per_seed(reference):
     ref_out, agg, results = reference
     summary = json.loads((ref_out / "summary.json").read_text())
     assert summary["episodes"] == 6 and summary["perception"] == "oracle"
-    for key, field in (("success", "success"), ("collision", "collided"), ("timeout", "timeout")):
+    for key, field in (("success", "success"), ("collision", "collided"), ("timeout", "timeout"),
+                       ("at_fault", "at_fault"), ("not_at_fault_only", "not_at_fault_only")):
         count = sum(s[field] for s in results.values())
         rate = summary["rates"][key]
         assert rate["count"] == count and rate["rate"] == pytest.approx(count / 6, abs=1e-4)
@@ -409,13 +410,14 @@ def test_summary_files_hold_the_rates_table_and_one_row_per_seed(reference):
     assert "| outcome | count | rate | 95 % Wilson interval |" in lines
     for key in ("success", "collision", "timeout"):
         assert sum(line.startswith(f"| {key} | {summary['rates'][key]['count']} |") for line in lines) == 1, key
-    assert "| seed | outcome | collisions | time to goal [s] | min clearance [m] |" in lines
+    assert "| seed | outcome | collisions (fault) | time to goal [s] | min clearance [m] |" in lines
     for seed, s in results.items():
         rows = [line for line in lines if line.startswith(f"| {seed} | ")]
         assert len(rows) == 1, (seed, rows)
         cells = [c.strip() for c in rows[0].strip("|").split("|")]
         assert cells[1] == ("success" if s["success"] else s["failure_reason"])
-        assert cells[2] == str(s["collision_count"])
+        faults = ", ".join(c["fault"] for c in s["collisions"])
+        assert cells[2] == str(s["collision_count"]) + (f" ({faults})" if faults else "")
         assert cells[3] == ("-" if s["time_to_goal"] is None else f"{s['time_to_goal']:.2f}")
     # one machine and installation ran them all: one environment, named in both files
     assert summary["environments"] == [results[SEEDS[0]]["environment"]]
