@@ -230,6 +230,45 @@ def _cmd_sweep(args) -> int:
     return status
 
 
+def _cmd_benchmark(args) -> int:
+    from experiments import benchmark
+    from experiments.episode import EpisodeConfig
+    from experiments.sweep import SweepError
+
+    def names(text, known, option):
+        out = [x.strip() for x in text.split(",") if x.strip()]
+        bad = [repr(x) for x in out if known is not None and x not in known]
+        if not out or bad:
+            raise UserError(f"--{option}: {bad[0] if bad else repr(text)} is not one of {', '.join(known)}"
+                            if known else f"--{option}: {text!r} names nothing")
+        return tuple(out)
+
+    if args.jobs < 1:
+        raise UserError("--jobs: must be >= 1")
+    _check_frame_latency(args.frame_latency)
+    families = names(args.families, None, "families") if args.families else benchmark.FAMILIES
+    for f in families:
+        load_scenario(f)  # validate before starting workers
+    modes = names(args.perception, None, "perception") if args.perception else benchmark.MODES
+    for m in modes:
+        _check_perception(m)
+    people = names(args.people, tuple(benchmark.PEOPLE), "people")
+    count, static_map = args.seeds, args.map
+    if args.quick:  # a smoke-sized run: two families, the oracle on the known map, two seeds
+        families = families if args.families else ("corridor", "head_on")
+        modes = modes if args.perception else ("oracle",)
+        count, static_map = min(count, 2), "truth"
+    cfg = EpisodeConfig(static_map=static_map, frame_latency=args.frame_latency)
+    try:
+        report = benchmark.run_benchmark(Path(args.out), args.split, count, families, modes, people, jobs=args.jobs,
+                                         dask_address=args.dask, cfg=cfg, progress=not args.quiet)
+    except SweepError as e:
+        raise UserError(str(e)) from None
+    print(benchmark.markdown(report))
+    print(f"wrote {args.out}/report.md, {args.out}/report.json and {args.out}/plots/")
+    return 0
+
+
 def _cmd_compare(args) -> int:
     from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison
 
@@ -473,6 +512,25 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_episode_options(w)
     w.set_defaults(func=_cmd_sweep)
+
+    bm = sub.add_parser("benchmark", help="the navigation benchmark: scenario families x perception modes x people "
+                                          "who do or do not see the drone, on a named seed split; report.md")
+    bm.add_argument("what", choices=("nav",), help="nav: the closed-loop navigation benchmark")
+    bm.add_argument("--split", choices=("dev", "test"), default="dev",
+                    help="dev: seeds 0-999, for tuning and choosing; test: seeds 1000-1999, for reported figures")
+    bm.add_argument("--seeds", type=int, default=100, help="seeds per cell, the first of the split (default 100)")
+    bm.add_argument("--families", default=None, help="comma list (default: all shipped families)")
+    bm.add_argument("--perception", default=None, help="comma list of modes (default: dodt,oracle,static-only)")
+    bm.add_argument("--people", default="blind,aware",
+                    help="blind (people do not see the drone), aware (they do), or both (default)")
+    bm.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
+    bm.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
+    bm.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
+    bm.add_argument("--quick", action="store_true",
+                    help="smoke-sized: 2 seeds, corridor and head_on, oracle on the known map (unless given)")
+    bm.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_episode_options(bm)
+    bm.set_defaults(func=_cmd_benchmark)
 
     cp = sub.add_parser("compare", help="pair two sweeps seed by seed: seeds turned each way, exact sign test; "
                                         "CI gate on a significant regression")

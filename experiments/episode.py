@@ -200,7 +200,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
              "start": list(sc.drone.start), "goal": goal.tolist(), "map_resolution": vmap.cfg.resolution,
              "map_origin": list(vmap.cfg.origin),
              "static": [o.to_json() for o in world.obstacle_truth() if o.kind == "static"],
-             "people": [{"id": i, "height": round(w.height, 3)} for i, w in zip(world.person_ids, world.walkers)]})
+             "people": [{"id": i, "height": round(w.height, 3), "sees_drone": bool(sees)}
+                        for i, w, sees in zip(world.person_ids, world.walkers, world.crowd.sees)]})
 
     co = sc.corridor  # its walls are known: the planner keeps inside them (the map sees them only at a glance)
     geofence = (np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2]))

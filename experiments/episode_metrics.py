@@ -61,6 +61,7 @@ def summarize(records: list[dict]) -> dict:
         "scenario": header["scenario"], "seed": header["seed"], "perception": header["perception"],
         "planner": header.get("planner"), "static_map": header.get("static_map", "depth"),
         "frame_latency": header.get("frame_latency", 0),
+        "people_see_drone": any(p.get("sees_drone", False) for p in header.get("people", [])),
         "success": reached and not collided,
         "reached_goal": reached, "collided": collided, "collision_count": len(collisions),
         "collisions": rows,

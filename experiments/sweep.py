@@ -72,7 +72,7 @@ def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     return (max(0.0, mid - half), min(1.0, mid + half))
 
 
-def run_one(scenario: str, seed: int, perception: str, episodes_dir: str, keep_log: bool,
+def run_one(scenario, seed: int, perception: str, episodes_dir: str, keep_log: bool,
             cfg: EpisodeConfig = EpisodeConfig()) -> dict:
     """One episode in a worker (module-level so process pools and Dask can ship it)."""
     out = Path(episodes_dir) / f"seed_{seed:04d}"
@@ -180,14 +180,8 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
         if bar:
             bar.tick(s)
 
-    if todo:
-        if dask_address:
-            _run_dask(dask_address, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished)
-        elif jobs <= 1:
-            for seed in todo:
-                finished(run_one(scenario, seed, perception, episodes_dir, keep_logs, cfg))
-        else:
-            _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished)
+    run_tasks([(None, (scenario, seed, perception, episodes_dir, keep_logs, cfg)) for seed in todo], jobs,
+              dask_address, lambda _key, s: finished(s))
     if bar:
         bar.close()
     agg = aggregate([done[s] for s in seeds], name, perception)
@@ -212,23 +206,38 @@ def _exit_with_parent(parent_pid: int, period: float = 0.5) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def _run_pool(jobs, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished) -> None:
+def run_tasks(tasks: list[tuple], jobs: int, dask_address: str | None, finished) -> None:
+    """Run episodes: tasks are (key, run_one's arguments); finished(key, summary) is called in this process
+    as each ends (in the order they end). One at a time here, in a pool of ``jobs`` processes, or on a Dask
+    scheduler."""
+    if not tasks:
+        return
+    if dask_address:
+        _run_dask(dask_address, tasks, finished)
+    elif jobs <= 1:
+        for key, args in tasks:
+            finished(key, run_one(*args))
+    else:
+        _run_pool(jobs, tasks, finished)
+
+
+def _run_pool(jobs, tasks, finished) -> None:
     import multiprocessing as mp
 
     # spawn: every worker starts clean (PyBullet's EGL plugin and numba do not like forked parents).
     ex = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=_exit_with_parent,
                              initargs=(os.getpid(),))
     try:
-        pending = {ex.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, cfg) for s in todo}
+        pending = {ex.submit(run_one, *args): key for key, args in tasks}
         while pending:
-            ready, pending = wait(pending, return_when=FIRST_COMPLETED)
+            ready, _ = wait(pending, return_when=FIRST_COMPLETED)
             for f in ready:
-                finished(f.result())
+                finished(pending.pop(f), f.result())
     finally:  # on an error or Ctrl-C, do not run the queued episodes only to throw them away
         ex.shutdown(wait=True, cancel_futures=True)
 
 
-def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, cfg, finished) -> None:
+def _run_dask(address, tasks, finished) -> None:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -239,10 +248,9 @@ def _run_dask(address, scenario, todo, perception, episodes_dir, keep_logs, cfg,
         raise SweepError(f"--dask: cannot connect to {address!r}: {e}") from None
     with client:
         # pure=False: every task gets a unique key, so sweeps sharing a scheduler never share results
-        futures = [client.submit(run_one, scenario, s, perception, episodes_dir, keep_logs, cfg, pure=False)
-                   for s in todo]
-        for f in as_completed(futures):
-            finished(f.result())
+        futures = {client.submit(run_one, *args, pure=False): key for key, args in tasks}
+        for f in as_completed(list(futures)):
+            finished(futures[f], f.result())
 
 
 def _dist(values) -> dict:
