@@ -24,9 +24,41 @@ PERSON_SPEED_RANGE = (0.5, 1.6)  # m/s, the issue's walking-speed band
 PERSON_HEIGHT_RANGE = (1.6, 1.85)  # m
 PERSON_RADIUS = 0.25  # m, footprint half-width used for the corridor and obstacle checks
 
+# Bounds on what a scenario may ask of the machine (README, "Scenario format", bounds). Beyond them a run
+# would not fit in memory or time (a waypoint 1e8 m away: a path sampled every 5 cm; 1,000 people: minutes
+# before the first frame), so they are refused on load like any other mistake.
+MAX_FILE_BYTES = 1 << 20  # a scenario file: 1 MiB
+MAX_DURATION = 3600.0  # s, duration, start_delay and keyframe times
+MAX_COORDINATE = 1000.0  # m, |x|, |y|, |z| of every position given (the corridor itself is at most 200 m long)
+MAX_OBSTACLE_SIZE = 200.0  # m, each dimension of an obstacle
+MAX_MOUNT_OFFSET = 1.0  # m, |x|, |y|, |z| of the camera in the body frame
+MAX_ANGLE_DEG = 360.0  # |angle| in degrees
+MAX_OBSTACLES = 200
+MAX_PEOPLE = 100
+MAX_POINTS = 100  # waypoints of a person, keyframes of a camera path
+MAX_CHOICES = 100  # values of one {choice = [...]}
+MAX_NAME_CHARS = 200
+SEED_MAX = 2**63 - 1  # the largest TOML integer
+
 
 class ScenarioError(ValueError):
     """A scenario file is wrong: the message names the file, the key and the reason."""
+
+
+def _finite(x: Any) -> bool:
+    """A number (not a boolean) that is finite as a float (an integer too large for one is not)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
+def _short(v: Any, limit: int = 80) -> str:
+    """repr(v) cut to ``limit`` characters: a message quotes what it refuses, on one line of bounded length."""
+    r = repr(v)
+    return r if len(r) <= limit else r[:limit] + "..."
 
 
 # --------------------------------------------------------------------------- dataclasses
@@ -232,7 +264,7 @@ class Scenario:
             for i, part in enumerate(parts[:-1]):
                 if isinstance(node, list):
                     if not part.isdigit() or int(part) >= len(node):
-                        raise ScenarioError(f"{self.source}: {key}: {'.'.join(parts[:i])} has no item {part!r}")
+                        raise ScenarioError(f"{self.source}: {key}: {'.'.join(parts[:i])} has no item {_short(part)}")
                     node = node[int(part)]
                 else:
                     node = node.setdefault(part, {})
@@ -279,21 +311,21 @@ class _Section:
             return default
         v = self.raw(name)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            self.fail(self.key(name), f"expected a number, got {v!r}")
+            self.fail(self.key(name), f"expected a number, got {_short(v)}")
         if integer and not isinstance(v, int):
-            self.fail(self.key(name), f"expected an integer, got {v!r}")
-        if not math.isfinite(v):
-            self.fail(self.key(name), f"must be finite, got {v!r}")
+            self.fail(self.key(name), f"expected an integer, got {_short(v)}")
+        if not integer and not _finite(v):
+            self.fail(self.key(name), f"must be finite, got {_short(v)}")
         if lo is not None and (v <= lo if lo_open else v < lo):
-            self.fail(self.key(name), f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
+            self.fail(self.key(name), f"must be {'>' if lo_open else '>='} {lo}, got {_short(v)}")
         if hi is not None and v > hi:
-            self.fail(self.key(name), f"must be <= {hi}, got {v!r}")
+            self.fail(self.key(name), f"must be <= {hi}, got {_short(v)}")
         return int(v) if integer else float(v)
 
     def boolean(self, name, default):
         v = self.raw(name, default)
         if not isinstance(v, bool):
-            self.fail(self.key(name), f"expected true or false, got {v!r}")
+            self.fail(self.key(name), f"expected true or false, got {_short(v)}")
         return v
 
     def string(self, name, default=None, choices=None):
@@ -301,12 +333,13 @@ class _Section:
         if v is None:
             self.fail(self.key(name), "is required")
         if not isinstance(v, str):
-            self.fail(self.key(name), f"expected a string, got {v!r}")
+            self.fail(self.key(name), f"expected a string, got {_short(v)}")
         if choices is not None and v not in choices:
-            self.fail(self.key(name), f"must be one of {', '.join(choices)}; got {v!r}")
+            self.fail(self.key(name), f"must be one of {', '.join(choices)}; got {_short(v)}")
         return v
 
-    def vector(self, name, n, default=None, required=False):
+    def vector(self, name, n, default=None, required=False, bound=MAX_COORDINATE, what="coordinates"):
+        """A list of n finite numbers, each within +-bound (``what`` names them in the message)."""
         if name not in self.data:
             if required:
                 self.fail(self.key(name), "is required")
@@ -314,28 +347,38 @@ class _Section:
             return default
         v = self.raw(name)
         if not isinstance(v, list) or len(v) != n:
-            self.fail(self.key(name), f"expected a list of {n} numbers, got {v!r}")
+            self.fail(self.key(name), f"expected a list of {n} numbers, got {_short(v)}")
         out = []
         for x in v:
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                self.fail(self.key(name), f"expected a list of {n} finite numbers, got {v!r}")
+            if not _finite(x):
+                self.fail(self.key(name), f"expected a list of {n} finite numbers, got {_short(v)}")
+            if abs(x) > bound:
+                self.fail(self.key(name), f"{what} must lie within +-{bound:g}, got {_short(v)}")
             out.append(float(x))
         return tuple(out)
 
-    def points(self, name, n, min_count=1, names=("x", "y")):
+    def points(self, name, n, min_count=1, names=("x", "y"), bounds=None):
+        """A list of at least min_count and at most MAX_POINTS points of n finite numbers; bounds: the
+        largest |value| of each field (default: MAX_COORDINATE for all)."""
         v = self.raw(name, [])
         if not isinstance(v, list) or len(v) < min_count:
             self.fail(self.key(name), f"expected a list of at least {min_count} points [{', '.join(names)}]")
+        if len(v) > MAX_POINTS:
+            self.fail(self.key(name), f"at most {MAX_POINTS} points, got {len(v)}")
+        bounds = bounds or (MAX_COORDINATE,) * n
         out = []
         for i, p in enumerate(v):
             if (not isinstance(p, list) or len(p) != n
-                    or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in p)):
-                self.fail(f"{self.key(name)}[{i}]", f"expected {n} finite numbers, got {p!r}")
+                    or any(not _finite(x) for x in p)):
+                self.fail(f"{self.key(name)}[{i}]", f"expected {n} finite numbers, got {_short(p)}")
+            for field_name, x, b in zip(names, p, bounds):
+                if abs(x) > b:
+                    self.fail(f"{self.key(name)}[{i}]", f"{field_name} must lie within +-{b:g}, got {_short(x)}")
             out.append(tuple(float(x) for x in p))
         return tuple(out)
 
     def color(self, name):
-        c = self.vector(name, 3)
+        c = self.vector(name, 3, bound=math.inf)
         if c is not None and any(not 0.0 <= x <= 1.0 for x in c):
             self.fail(self.key(name), f"color components must lie in [0, 1], got {list(c)}")
         return c
@@ -371,7 +414,10 @@ def load_scenario(name_or_path: str | Path, seed: int | None = None) -> Scenario
     are drawn for ``seed`` (default: the file's own seed); ``Scenario.for_seed`` draws another."""
     path = scenario_path(name_or_path)
     try:
-        text = path.read_text(encoding="utf-8")
+        if path.is_file() and path.stat().st_size > MAX_FILE_BYTES:
+            raise ScenarioError(f"{path}: {path.stat().st_size} bytes; a scenario file holds at most "
+                                f"{MAX_FILE_BYTES} bytes")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark, as some editors write, is no error
     except OSError as e:
         raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
     except UnicodeDecodeError as e:
@@ -380,11 +426,18 @@ def load_scenario(name_or_path: str | Path, seed: int | None = None) -> Scenario
 
 
 def parse_scenario(text: str, source: str = "<string>", seed: int | None = None) -> Scenario:
+    if len(text) > MAX_FILE_BYTES:
+        raise ScenarioError(f"{source}: {len(text)} characters; a scenario holds at most {MAX_FILE_BYTES}")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{source}: not valid TOML: {e}") from None
-    return _from_tables(data, source, seed)
+    except RecursionError:
+        raise ScenarioError(f"{source}: not valid TOML: arrays or tables nested too deeply") from None
+    try:
+        return _from_tables(data, source, seed)
+    except RecursionError:
+        raise ScenarioError(f"{source}: arrays or tables nested too deeply") from None
 
 
 # --------------------------------------------------------------------------- ranges drawn by the seed
@@ -426,9 +479,9 @@ def _follow(tables: Any, drawn: Any, source: str, key: str = "") -> Any:
     """Replace every {same_as = ...} by the value it names in ``drawn``, times and plus applied."""
     if _range_of(tables) == "same_as":
         v = _lookup(drawn, tables["same_as"])
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ScenarioError(f"{source}: {key}: same_as {tables['same_as']!r} does not name a number of the "
-                                f"scenario (got {v!r})")
+        if not _finite(v):
+            raise ScenarioError(f"{source}: {key}: same_as {_short(tables['same_as'])} does not name a number of the "
+                                f"scenario (got {_short(v)})")
         return v * tables.get("times", 1.0) + tables.get("plus", 0.0)
     if isinstance(tables, dict):
         return {k: _follow(x, drawn, source, f"{key}.{k}" if key else k) for k, x in tables.items()}
@@ -453,22 +506,24 @@ def _check_ranges(v: Any, source: str, key: str = "") -> None:
     if kind == "uniform":
         r = v[kind]
         if (not isinstance(r, list) or len(r) != 2
-                or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in r)):
-            raise ScenarioError(f"{source}: {key}: expected {{uniform = [lo, hi]}} with two finite numbers, got {r!r}")
+                or any(not _finite(x) for x in r)):
+            raise ScenarioError(f"{source}: {key}: expected {{uniform = [lo, hi]}} with two finite numbers, got {_short(r)}")
         if r[0] > r[1]:
             raise ScenarioError(f"{source}: {key}: uniform range [{r[0]}, {r[1]}] has lo > hi")
     elif kind == "choice":
         r = v[kind]
         if not isinstance(r, list) or not r or any(isinstance(x, (dict, list)) for x in r):
             raise ScenarioError(f"{source}: {key}: expected {{choice = [a, b, ...]}} with at least one plain value, "
-                                f"got {r!r}")
+                                f"got {_short(r)}")
+        if len(r) > MAX_CHOICES:
+            raise ScenarioError(f"{source}: {key}: at most {MAX_CHOICES} values to choose from, got {len(r)}")
     elif kind == "same_as":
         if not isinstance(v["same_as"], str):
             raise ScenarioError(f"{source}: {key}: same_as must name a value, as \"obstacles.0.center.0\"")
         for k in ("times", "plus"):
             x = v.get(k, 0.0)
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                raise ScenarioError(f"{source}: {key}.{k}: expected a finite number, got {x!r}")
+            if not _finite(x):
+                raise ScenarioError(f"{source}: {key}.{k}: expected a finite number, got {_short(x)}")
     elif isinstance(v, dict):
         for k, x in v.items():
             _check_ranges(x, source, f"{key}.{k}" if key else k)
@@ -524,7 +579,10 @@ def _from_tables(data: dict, source: str, seed: int | None) -> Scenario:
 
     def pick(kind, r):
         if kind == "uniform":
-            return float(rng.uniform(r[0], r[1]))
+            if r[0] < r[1]:
+                return float(rng.uniform(r[0], r[1]))
+            rng.random()  # lo == hi (numpy refuses uniform(0.0, -0.0)): the same draws follow as from uniform
+            return float(r[0])
         return r[int(rng.integers(len(r)))]
 
     error = None
@@ -541,14 +599,16 @@ def _from_tables(data: dict, source: str, seed: int | None) -> Scenario:
 def _build(data: dict, source: str, geometry: bool = True) -> Scenario:
     top = _Section(data, "", source)
     name = top.string("name", Path(source).stem)
-    seed = top.number("seed", 0, lo=0, integer=True)
-    duration = top.number("duration", 20.0, lo=0.0, lo_open=True, hi=3600.0)
+    if not name or len(name) > MAX_NAME_CHARS or not name.isprintable():
+        top.fail("name", f"expected 1 to {MAX_NAME_CHARS} printable characters on one line, got {_short(name)}")
+    seed = top.number("seed", 0, lo=0, hi=SEED_MAX, integer=True)
+    duration = top.number("duration", 20.0, lo=0.0, lo_open=True, hi=MAX_DURATION)
     description = top.string("description", "")
     segmentation = top.boolean("segmentation", True)
 
     corridor = _read_corridor(top.sub("corridor"))
-    obstacles = tuple(_read_obstacle(s) for s in _array_of_tables(top, "obstacles"))
-    people = tuple(_read_person(s) for s in _array_of_tables(top, "people"))
+    obstacles = tuple(_read_obstacle(s) for s in _array_of_tables(top, "obstacles", MAX_OBSTACLES))
+    people = tuple(_read_person(s) for s in _array_of_tables(top, "people", MAX_PEOPLE))
     drone = _read_drone(top.sub("drone"))
     camera = _read_camera(top.sub("camera"))
     noise = _read_noise(top.sub("noise"))
@@ -565,10 +625,12 @@ def _build(data: dict, source: str, geometry: bool = True) -> Scenario:
     return sc
 
 
-def _array_of_tables(top: _Section, name: str) -> list[_Section]:
+def _array_of_tables(top: _Section, name: str, most: int) -> list[_Section]:
     v = top.raw(name, [])
     if not isinstance(v, list):
         top.fail(name, "expected an array of tables ([[%s]])" % name)
+    if len(v) > most:
+        top.fail(name, f"at most {most} {name}, got {len(v)}")
     return [_Section(item, f"{name}[{i}]", top.source) for i, item in enumerate(v)]
 
 
@@ -589,7 +651,7 @@ def _read_obstacle(s: _Section) -> Obstacle:
         h = s.number("height", lo=0.05, hi=20.0)
         size = (2 * r, 2 * r, h)
     else:
-        size = s.vector("size", 3, required=True)
+        size = s.vector("size", 3, required=True, bound=MAX_OBSTACLE_SIZE, what="dimensions")
         if any(x <= 0 for x in size):
             s.fail(s.key("size"), f"every dimension must be > 0, got {list(size)}")
     yaw = math.radians(s.number("yaw_deg", 0.0, lo=-360.0, hi=360.0))
@@ -605,7 +667,7 @@ def _read_person(s: _Section) -> Person:
     if height is not None and not PERSON_HEIGHT_RANGE[0] <= height <= PERSON_HEIGHT_RANGE[1]:
         s.fail(s.key("height"), f"must lie in [{PERSON_HEIGHT_RANGE[0]}, {PERSON_HEIGHT_RANGE[1]}] m, got {height}")
     kw: dict[str, Any] = dict(behaviour=b, speed=speed, height=height,
-                              start_delay=s.number("start_delay", 0.0, lo=0.0, hi=3600.0),
+                              start_delay=s.number("start_delay", 0.0, lo=0.0, hi=MAX_DURATION),
                               color=s.color("color"))
     if b in ("waypoint_loop", "back_and_forth", "crossing"):
         kw["waypoints"] = s.points("waypoints", 2, min_count=2)
@@ -659,8 +721,9 @@ def _read_camera(s: _Section) -> Camera:
                cy=s.number("cy", Camera.cy * h / 480, lo=0.0, hi=float(h)),
                min_range=s.number("min_range", Camera.min_range, lo=0.15, hi=5.0),  # >= the near plane
                max_range=s.number("max_range", Camera.max_range, lo=0.5, hi=100.0),
-               mount_xyz=s.vector("mount_xyz", 3, Camera.mount_xyz),
-               mount_rpy=tuple(math.radians(a) for a in s.vector("mount_rpy_deg", 3, (0.0, 0.0, 0.0))),
+               mount_xyz=s.vector("mount_xyz", 3, Camera.mount_xyz, bound=MAX_MOUNT_OFFSET, what="offsets [m]"),
+               mount_rpy=tuple(math.radians(a) for a in s.vector("mount_rpy_deg", 3, (0.0, 0.0, 0.0),
+                                                                 bound=MAX_ANGLE_DEG, what="angles [deg]")),
                color=s.boolean("color", True),
                renderer=s.string("renderer", "auto", choices=("auto", "egl", "tiny")))
     if c.max_range <= c.min_range:
@@ -706,7 +769,8 @@ def _read_camera_path(s: _Section) -> CameraPath:
         s.fail(s.path, "give exactly one of keyframes or follow_person")
     kw: dict[str, Any] = dict(mode=mode)
     if has_kf:
-        kf = s.points("keyframes", 5, min_count=1, names=("t", "x", "y", "z", "yaw_deg"))
+        kf = s.points("keyframes", 5, min_count=1, names=("t", "x", "y", "z", "yaw_deg"),
+                      bounds=(MAX_DURATION, MAX_COORDINATE, MAX_COORDINATE, MAX_COORDINATE, MAX_ANGLE_DEG))
         for i in range(1, len(kf)):
             if kf[i][0] <= kf[i - 1][0]:
                 s.fail(f"{s.key('keyframes')}[{i}]", "times must increase")
@@ -791,8 +855,12 @@ def _check_geometry(sc: Scenario, top: _Section) -> None:
         j = in_obstacle(wps[0], PERSON_RADIUS)
         if j is not None:
             top.fail(path_key, f"the person starts inside obstacles[{j}] ({sc.obstacles[j].kind})")
-        samples = _sample_segments(wps, closed=p.behaviour in ("waypoint_loop", "circle"))
-        outside = ~_inside_corridor(c, samples, PERSON_RADIUS)
+        # the waypoints first, then the path between them sampled every 5 cm (inside the corridor: bounded)
+        samples = wps
+        outside = ~_inside_corridor(c, wps, PERSON_RADIUS)
+        if not np.any(outside):
+            samples = _sample_segments(wps, closed=p.behaviour in ("waypoint_loop", "circle"))
+            outside = ~_inside_corridor(c, samples, PERSON_RADIUS)
         if np.any(outside):
             q = samples[np.argmax(outside)]
             top.fail(path_key, f"the path leaves the corridor near ({q[0]:.2f}, {q[1]:.2f}) "
