@@ -1,14 +1,18 @@
 """`dodt-nav`: the project's command line.
 
 User mistakes (a bad scenario, a missing file, a bad option) print one line naming what is
-wrong and exit with status 2, never a traceback.
+wrong and exit with status 2, never a traceback. Options are checked when they are parsed, and
+files a command will write are checked before it starts its work.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from dodt.config import LearnedConfig
@@ -20,13 +24,88 @@ class UserError(Exception):
     """A mistake of the user's: reported in one line, exit status 2."""
 
 
+# --------------------------------------------------------------------------- option checks
+#
+# Every numeric option is parsed by one of these: a value out of its bounds (NaN, infinities,
+# negative counts, ...) is refused by argparse as "argument --name: reason", before any work.
+
+SEED_MAX = 2**63 - 1  # seeds are whole numbers from 0 to what a scenario file's TOML integer holds
+MAX_SECONDS = 3600.0  # s, a time limit: the longest a scenario may last (sim.scenario.MAX_DURATION)
+MAX_JOBS = 256  # parallel episodes
+MAX_FRAME_LATENCY = 100  # camera periods: each delayed frame is held in memory until it is delivered
+
+
+def _whole(lo: int, hi: int | None = None, what: str = "a whole number"):
+    """A whole number in [lo, hi]; ``what`` names it in the messages."""
+    bounds = f">= {lo}" + (f" and <= {hi}" if hi is not None else "")
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {what} {bounds}, got {text!r}") from None
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"must be {bounds}, got {v}" if what == "a whole number"
+                                             else f"must be {what} {bounds}, got {v}")
+        return v
+    return parse
+
+
+def _real(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False, what: str = ""):
+    """A finite number in [lo, hi] (open ends as given); ``what`` replaces the bounds in the message."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not math.isfinite(v) or (v <= lo if lo_open else v < lo) or (v >= hi if hi_open else v > hi):
+            bounds = what or (f"must be a number {'>' if lo_open else '>='} {lo:g} and {'<' if hi_open else '<='} "
+                              f"{hi:g}")
+            raise argparse.ArgumentTypeError(f"{bounds}, got {text!r}")
+        return v
+    return parse
+
+
+_seed = _whole(0, SEED_MAX, "a seed, a whole number")
+_seconds = _real(0.0, MAX_SECONDS, lo_open=True, what=f"must be a number of seconds > 0 and <= {MAX_SECONDS:g}")
+_jobs = _whole(1, MAX_JOBS)
+_fraction = _real(0.0, 1.0, what="must be a fraction between 0 and 1")
+_frame_latency = _whole(0, MAX_FRAME_LATENCY, "a whole number of camera periods")
+
+
+def _writable_file(path: str, option: str) -> None:
+    """Refuse now a file the command writes at its end (a sweep's JUnit XML): found unwritable after the
+    work, the work would be lost. The file is created and removed when it did not exist."""
+    p = Path(path)
+    if p.is_dir():
+        raise UserError(f"{option}: {path} is a folder, not a file")
+    existed = p.exists()
+    try:
+        with open(p, "a"):
+            pass
+    except OSError as e:
+        raise UserError(f"{option}: cannot write {path}: {e.strerror or e}") from None
+    if not existed:
+        p.unlink()
+
+
+def _output_folder(path: str, option: str = "--out") -> Path:
+    """The output folder, created now (a file in the way or no permission: refused before the work)."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"{option}: cannot create the folder {path}: {e.strerror or e}") from None
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise UserError(f"{option}: cannot write into the folder {path}")
+    return p
+
+
 def _cmd_simulate(args) -> int:
     from experiments.simulate import simulate
 
-    if args.save_every < 1:
-        raise UserError("--save-every: must be >= 1")
-    if args.duration is not None and args.duration <= 0:
-        raise UserError("--duration: must be > 0")
+    load_scenario(args.scenario)  # refused before the output folder is made
+    _output_folder(args.out)
     s = simulate(args.scenario, args.seed, Path(args.out), duration=args.duration, save_every=args.save_every,
                  renderer=args.renderer, segmentation=not args.no_segmentation)
     print(f"{s['scenario']} seed {s['seed']}: {s['sim_time']:.2f} s simulated in {s['wall_time_s']:.1f} s "
@@ -38,6 +117,8 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_bench(args) -> int:
+    if args.json is not None:
+        _writable_file(args.json, "--json")
     if args.what == "sim":
         from experiments.bench_sim import run
 
@@ -55,8 +136,7 @@ def _cmd_bench(args) -> int:
         unknown = [c for c in configs if c not in PRESETS]
         if unknown:
             raise UserError(f"--configs: unknown configuration {unknown[0]!r}; known: {', '.join(PRESETS)}")
-        if args.seeds < 1:
-            raise UserError("--seeds: must be >= 1")
+        _output_folder(args.out)
         duration = args.duration if args.duration else (6.0 if args.quick else None)
         bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration)
         return 0
@@ -104,10 +184,7 @@ def _cmd_run(args) -> int:
 
     sc = load_scenario(args.scenario)
     _check_perception(args.perception)
-    if args.duration is not None and args.duration <= 0:
-        raise UserError("--duration: must be > 0")
-    _check_frame_latency(args.frame_latency)
-    out = Path(args.out)
+    out = _output_folder(args.out)
     viewer = None
     if args.viz == "live":
         from experiments.viz import LiveViewer
@@ -151,6 +228,7 @@ def _cmd_replay(args) -> int:
     from experiments.viz import build_replay_html
 
     out = Path(args.out) if args.out else Path(args.log).with_name("replay.html")
+    _writable_file(out, "--out")
     try:
         html = build_replay_html(Path(args.log), out)
     except ValueError as e:
@@ -193,13 +271,8 @@ def _cmd_sweep(args) -> int:
 
     load_scenario(args.scenario)  # validate before starting workers
     _check_perception(args.perception)
-    if args.jobs < 1:
-        raise UserError("--jobs: must be >= 1")
-    _check_frame_latency(args.frame_latency)
-    for name in ("max_collision_rate", "max_at_fault_rate"):
-        v = getattr(args, name)
-        if v is not None and not 0.0 <= v <= 1.0:
-            raise UserError(f"--{name.replace('_', '-')}: must be a fraction between 0 and 1")
+    if args.junit:
+        _writable_file(args.junit, "--junit")
     try:
         seeds = sweep.parse_seeds(args.seeds)
         cfg = sweep.EpisodeConfig(static_map=args.map, frame_latency=args.frame_latency)
@@ -243,12 +316,12 @@ def _cmd_benchmark(args) -> int:
                             if known else f"--{option}: {text!r} names nothing")
         return tuple(out)
 
-    if args.jobs < 1:
-        raise UserError("--jobs: must be >= 1")
-    _check_frame_latency(args.frame_latency)
     families = names(args.families, None, "families") if args.families else benchmark.FAMILIES
     for f in families:
-        load_scenario(f)  # validate before starting workers
+        try:
+            load_scenario(f)  # validate before starting workers
+        except ScenarioError as e:
+            raise UserError(f"--families: {e}") from None
     modes = names(args.perception, None, "perception") if args.perception else benchmark.MODES
     for m in modes:
         _check_perception(m)
@@ -272,8 +345,6 @@ def _cmd_benchmark(args) -> int:
 def _cmd_compare(args) -> int:
     from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison
 
-    if args.fail_if_worse is not None and not 0.0 < args.fail_if_worse <= 1.0:
-        raise UserError("--fail-if-worse: must be a significance level in (0, 1]")
     try:
         c = compare_sweeps(args.base, args.new)
     except CompareError as e:
@@ -290,8 +361,7 @@ def _cmd_compare(args) -> int:
 def _cmd_reproduce(args) -> int:
     from experiments.reproduce import reproduce
 
-    if args.jobs < 1:
-        raise UserError("--jobs: must be >= 1")
+    _output_folder(args.out)
     reproduce(Path(args.out), quick=args.quick, jobs=args.jobs)
     return 0
 
@@ -308,8 +378,6 @@ def _detector_data(args, splits: tuple[str, ...] = ("train", "val")) -> Path:
         dataset.check_disjoint(train_seeds, val_seeds)
     except (SweepError, ValueError) as e:
         raise UserError(str(e).replace("--seeds", "--train-seeds/--val-seeds")) from None
-    if args.images_per_seed < 1:
-        raise UserError("--images-per-seed: must be >= 1")
     data = Path(args.data)
     for split, seeds in (("train", train_seeds), ("val", val_seeds)):
         if split not in splits:
@@ -332,20 +400,8 @@ def _cmd_train_detector(args) -> int:
         import torch  # noqa: F401  (training only; run time uses onnxruntime)
     except ImportError:
         raise UserError("training needs PyTorch: pip install torch==2.13.0 onnx (or pip install -e '.[train]')") from None
-    if args.epochs < 1:
-        raise UserError("--epochs: must be >= 1")
-    if args.threads < 1:
-        raise UserError("--threads: must be >= 1")
     from experiments.detector.train import option_flags, train
 
-    if args.batch_size < 2:
-        raise UserError("--batch-size: must be >= 2 (BatchNorm)")
-    if not args.lr > 0:
-        raise UserError("--lr: must be > 0")
-    if args.eval_every < 0:
-        raise UserError("--eval-every: must be >= 0")
-    if args.warmup_epochs < 0:
-        raise UserError("--warmup-epochs: must be >= 0")
     data = _detector_data(args)
     command = (f"dodt-nav train-detector --data {args.data} --train-seeds {args.train_seeds} --val-seeds "
                f"{args.val_seeds} --images-per-seed {args.images_per_seed} --epochs {args.epochs} --seed {args.seed} "
@@ -388,10 +444,6 @@ def _cmd_eval_detector(args) -> int:
     except ValueError as e:
         raise UserError(f"--views: {e}") from None
     data = _detector_data(args, splits=("val",))  # evaluation needs no training images
-    if not args.soft_nms >= 0:
-        raise UserError(f"--soft-nms: expected a sigma of 0 (off) or more, got {args.soft_nms}")
-    if not 0 < args.score_floor < 1:
-        raise UserError(f"--score-floor: expected a score between 0 and 1, got {args.score_floor}")
     r = average_precision(model, data / "val.npz", max_distance=args.max_distance, nms_iou=args.nms_iou,
                           min_visible_px=args.min_visible_px, views=views, soft_sigma=args.soft_nms,
                           score_threshold=args.score_floor)
@@ -425,26 +477,28 @@ def _add_episode_options(parser: argparse.ArgumentParser) -> None:
                         help="static map: depth (built from the camera, default) or truth (the scenario's geometry "
                              "known from the start; with the oracles or static-only nothing is rendered: a "
                              "fast planner test)")
-    parser.add_argument("--frame-latency", type=int, default=1, metavar="N",
+    parser.add_argument("--frame-latency", type=_frame_latency, default=1, metavar="N",
                         help="camera periods between a frame's capture and its perception (default 1: the next "
                              "frame renders in a second process meanwhile; 0: at once, as before)")
 
 
-def _check_frame_latency(n: int) -> None:
-    if n < 0:
-        raise UserError(f"--frame-latency: must be a whole number of camera periods >= 0, got {n}")
+class _Parser(argparse.ArgumentParser):
+    """argparse with its refusals on one line (its own print the usage first), exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="dodt-nav", description=__doc__.splitlines()[0])
+    ap = _Parser(prog="dodt-nav", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("simulate", help="fly a scenario headless; write depth/color PNGs, ground truth, summary")
     s.add_argument("scenario", help="a scenario file, or the name of a shipped one (see `dodt-nav scenarios`)")
-    s.add_argument("--seed", type=int, default=None, help="seed (default: the scenario's)")
+    s.add_argument("--seed", type=_seed, default=None, help="seed (default: the scenario's)")
     s.add_argument("--out", required=True, help="output folder")
-    s.add_argument("--duration", type=float, default=None, help="seconds to simulate (default: the scenario's)")
-    s.add_argument("--save-every", type=int, default=1, help="write every k-th camera frame")
+    s.add_argument("--duration", type=_seconds, default=None, help="seconds to simulate (default: the scenario's)")
+    s.add_argument("--save-every", type=_whole(1), default=1, help="write every k-th camera frame")
     s.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
     s.add_argument("--no-segmentation", action="store_true", help="skip the segmentation images (faster)")
     s.set_defaults(func=_cmd_simulate)
@@ -454,24 +508,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sim: render/physics/real-time; perception: Table I; runtime: Table II; planner: voxel map "
                         "update and MPC solve times; loop: real-time factor of a closed-loop episode")
     b.add_argument("--scenario", default=None, help="sim, runtime: the scenario (default corridor)")
-    b.add_argument("--seconds", type=float, default=10.0, help="simulated seconds (sim: real-time figure; runtime: frames)")
+    b.add_argument("--seconds", type=_seconds, default=10.0, help="simulated seconds (sim: real-time figure; runtime: frames)")
     b.add_argument("--out", default="runs/bench_perception", help="perception: output folder")
-    b.add_argument("--seeds", type=int, default=1, help="perception: seeds 0..N-1 per scenario")
+    b.add_argument("--seeds", type=_whole(1, 10_000), default=1, help="perception: seeds 0..N-1 per scenario")
     b.add_argument("--scenarios", default=None, help="perception: comma-separated scenarios")
     b.add_argument("--configs", default=None, help="perception: comma-separated configurations")
-    b.add_argument("--duration", type=float, default=None, help="perception: seconds per scenario")
+    b.add_argument("--duration", type=_seconds, default=None, help="perception: seconds per scenario")
     b.add_argument("--quick", action="store_true", help="perception: 6 s per scenario")
     b.add_argument("--config", default="dodt", help="runtime: the configuration; loop: the perception mode")
-    b.add_argument("--frames", type=int, default=30, help="frames for the render medians")
+    b.add_argument("--frames", type=_whole(1, 100_000), default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     b.set_defaults(func=_cmd_bench)
 
     r = sub.add_parser("run", help="fly one closed-loop episode headless; write summary.json and the episode log")
     r.add_argument("scenario", help="a scenario file, or the name of a shipped one (see `dodt-nav scenarios`)")
-    r.add_argument("--seed", type=int, default=None, help="seed (default: the scenario's)")
+    r.add_argument("--seed", type=_seed, default=None, help="seed (default: the scenario's)")
     r.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, oracle-noisy, static-only, or a DODT preset")
     r.add_argument("--out", required=True, help="output folder")
-    r.add_argument("--duration", type=float, default=None, help="time limit in seconds (default: the scenario's)")
+    r.add_argument("--duration", type=_seconds, default=None, help="time limit in seconds (default: the scenario's)")
     r.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
     _add_episode_options(r)
     r.add_argument("--viz", choices=("live", "html"), default=None,
@@ -488,7 +542,7 @@ def build_parser() -> argparse.ArgumentParser:
     co = sub.add_parser("collisions", help="one row per collision of saved episodes: who closed in, was the person "
                                            "in view, tracked, reported moving")
     co.add_argument("source", nargs="+", help="episode logs, run folders or sweep folders")
-    co.add_argument("--window", type=float, default=2.0, help="seconds before each collision looked at (default 2)")
+    co.add_argument("--window", type=_seconds, default=2.0, help="seconds before each collision looked at (default 2)")
     co.set_defaults(func=_cmd_collisions)
 
     pl = sub.add_parser("plot", help="PNG figures of an episode (run folder or log) or a sweep (sweep folder)")
@@ -500,11 +554,11 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("scenario", help="a scenario file, or the name of a shipped one")
     w.add_argument("--seeds", default="0:20", help="start:stop, a number, or a comma list (default 0:20)")
     w.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, oracle-noisy, static-only, or a DODT preset")
-    w.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
+    w.add_argument("--jobs", type=_jobs, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
     w.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
-    w.add_argument("--max-collision-rate", type=float, default=None,
+    w.add_argument("--max-collision-rate", type=_fraction, default=None,
                    help="exit with status 1 when the rate of episodes with any collision exceeds this fraction")
-    w.add_argument("--max-at-fault-rate", type=float, default=None,
+    w.add_argument("--max-at-fault-rate", type=_fraction, default=None,
                    help="exit with status 1 when the rate of episodes with an at-fault collision exceeds this fraction")
     w.add_argument("--junit", default=None, help="write JUnit XML, one test case per seed")
     w.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
@@ -518,12 +572,12 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("what", choices=("nav",), help="nav: the closed-loop navigation benchmark")
     bm.add_argument("--split", choices=("dev", "test"), default="dev",
                     help="dev: seeds 0-999, for tuning and choosing; test: seeds 1000-1999, for reported figures")
-    bm.add_argument("--seeds", type=int, default=100, help="seeds per cell, the first of the split (default 100)")
+    bm.add_argument("--seeds", type=_whole(1, 1000), default=100, help="seeds per cell, the first of the split (default 100)")
     bm.add_argument("--families", default=None, help="comma list (default: all shipped families)")
     bm.add_argument("--perception", default=None, help="comma list of modes (default: dodt,oracle,static-only)")
     bm.add_argument("--people", default="blind,aware",
                     help="blind (people do not see the drone), aware (they do), or both (default)")
-    bm.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
+    bm.add_argument("--jobs", type=_jobs, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
     bm.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
     bm.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
     bm.add_argument("--quick", action="store_true",
@@ -536,7 +590,8 @@ def build_parser() -> argparse.ArgumentParser:
                                         "CI gate on a significant regression")
     cp.add_argument("base", help="the baseline's sweep folder (or its results.jsonl)")
     cp.add_argument("new", help="the change's sweep folder (or its results.jsonl)")
-    cp.add_argument("--fail-if-worse", type=float, default=None, metavar="ALPHA",
+    cp.add_argument("--fail-if-worse", type=_real(0.0, 1.0, lo_open=True, what="must be a significance level in (0, 1]"),
+                    default=None, metavar="ALPHA",
                     help="exit with status 1 when more seeds turned to failure than to success and the sign "
                          "test's p is below ALPHA (e.g. 0.05)")
     cp.set_defaults(func=_cmd_compare)
@@ -544,7 +599,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="Table I, Table II and the corridor sweeps in one report.md")
     rep.add_argument("--out", required=True, help="output folder (rerun to resume the sweeps)")
     rep.add_argument("--quick", action="store_true", help="a small version that finishes in minutes")
-    rep.add_argument("--jobs", type=int, default=max(1, os.cpu_count() or 1), help="parallel episodes")
+    rep.add_argument("--jobs", type=_jobs, default=max(1, os.cpu_count() or 1), help="parallel episodes")
     rep.set_defaults(func=_cmd_reproduce)
 
     for name, func, text in (("train-detector", _cmd_train_detector,
@@ -555,29 +610,29 @@ def build_parser() -> argparse.ArgumentParser:
         d.add_argument("--data", default="runs/detector_data", help="dataset folder (train.npz, val.npz)")
         d.add_argument("--train-seeds", default="0:200", help="scene seeds of the training split")
         d.add_argument("--val-seeds", default="1000:1040", help="scene seeds of the validation split")
-        d.add_argument("--images-per-seed", type=int, default=20, help="images rendered per scene")
+        d.add_argument("--images-per-seed", type=_whole(1, 100_000), default=20, help="images rendered per scene")
         if name == "train-detector":
-            d.add_argument("--epochs", type=int, default=60)
-            d.add_argument("--seed", type=int, default=0, help="training seed (weights, data order, augmentation)")
-            d.add_argument("--threads", type=int, default=2, help="PyTorch threads (the result depends on it)")
+            d.add_argument("--epochs", type=_whole(1, 100_000), default=60)
+            d.add_argument("--seed", type=_seed, default=0, help="training seed (weights, data order, augmentation)")
+            d.add_argument("--threads", type=_whole(1, 1024), default=2, help="PyTorch threads (the result depends on it)")
             d.add_argument("--device", default="cpu", help="cpu, or a CUDA device (cuda, cuda:1)")
             d.add_argument("--arch", default="base", help="network size: base (FastestDet's shape), wide, or wide8 (wide with a stride-8 head)")
-            d.add_argument("--batch-size", type=int, default=32)
-            d.add_argument("--lr", type=float, default=3e-3, help="AdamW's peak learning rate")
-            d.add_argument("--warmup-epochs", type=float, default=1.0, help="linear warm-up before the cosine decay")
-            d.add_argument("--eval-every", type=int, default=5, help="validate every N epochs (0: at the end only)")
+            d.add_argument("--batch-size", type=_whole(2, 100_000, "a whole number (BatchNorm needs 2)"), default=32)
+            d.add_argument("--lr", type=_real(0.0, 10.0, lo_open=True), default=3e-3, help="AdamW's peak learning rate")
+            d.add_argument("--warmup-epochs", type=_real(0.0, 100_000.0), default=1.0, help="linear warm-up before the cosine decay")
+            d.add_argument("--eval-every", type=_whole(0), default=5, help="validate every N epochs (0: at the end only)")
             d.add_argument("--out", default="runs/detector", help="folder for person_detector.onnx and .json")
         else:
             d.add_argument("--model", default=None, help="an ONNX model with its .json (default: the shipped one)")
-            d.add_argument("--max-distance", type=float, default=10.0, help="people within this distance count")
-            d.add_argument("--nms-iou", type=float, default=0.45, help="non-maximum suppression IoU (FastestDet's 0.45)")
-            d.add_argument("--score-floor", type=float, default=0.05,
+            d.add_argument("--max-distance", type=_real(0.0, 1000.0, lo_open=True), default=10.0, help="people within this distance count")
+            d.add_argument("--nms-iou", type=_real(0.0, 1.0, lo_open=True), default=0.45, help="non-maximum suppression IoU (FastestDet's 0.45)")
+            d.add_argument("--score-floor", type=_real(0.0, 1.0, lo_open=True, hi_open=True), default=0.05,
                            help="detections scoring less are left out of the AP (default %(default)s; "
                                 "YOLO evaluations use 0.001, which counts more of the curve's tail)")
-            d.add_argument("--soft-nms", type=float, default=LearnedConfig().soft_nms_sigma, metavar="SIGMA",
+            d.add_argument("--soft-nms", type=_real(0.0, 100.0), default=LearnedConfig().soft_nms_sigma, metavar="SIGMA",
                            help="Gaussian soft-NMS with this sigma, as at run time (default %(default)s); "
                                 "0: NMS at --nms-iou")
-            d.add_argument("--min-visible-px", type=int, default=0,
+            d.add_argument("--min-visible-px", type=_whole(0), default=0,
                            help="ignore people showing fewer pixels at 640x480 (the perception metrics use 400)")
             d.add_argument("--views", default="full",
                            help="views fused at run time, a comma list of full, flip, center, center-flip")
@@ -587,7 +642,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "images as WebP, some 60 times smaller, for copying to a training machine")
     pk.add_argument("files", nargs="+", help="train.npz / val.npz files of one split, as rendered")
     pk.add_argument("--out", required=True, help="the packed file to write")
-    pk.add_argument("--quality", type=int, default=90, help="WebP quality 1-100, or 101 for lossless")
+    pk.add_argument("--quality", type=_whole(1, 101), default=90, help="WebP quality 1-100, or 101 for lossless")
     pk.set_defaults(func=_cmd_pack_detector_data)
 
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
@@ -599,8 +654,18 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _terminated(signum, frame):
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # SIGTERM (kill, a job scheduler) ends the command as Ctrl-C does: through its finally blocks, which
+    # close what it started (a render process, a viewer's server, a sweep's workers). Those also end on
+    # their own when this process is gone (SIGKILL): sim.parent_watch.
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminated)
     try:
         return args.func(args)
     except (ScenarioError, UserError, ModelError) as e:
@@ -613,6 +678,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("dodt-nav: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ from experiments.environment import distinct
 from experiments.episode import EpisodeConfig, run_episode
 
 RESULTS = "results.jsonl"
+SEED_MAX = 2**63 - 1  # what a scenario file's seed (a TOML integer) holds
 
 
 class SweepError(ValueError):
@@ -54,8 +55,8 @@ def parse_seeds(text: str) -> list[int]:
         if isinstance(e, SweepError):
             raise
         raise SweepError(f"--seeds: {text!r} is not a seed list (examples: 0:200, 5, 1,4,9)") from None
-    if not out or min(out) < 0:
-        raise SweepError(f"--seeds: {text!r}: seeds must be non-negative integers")
+    if not out or min(out) < 0 or max(out) > SEED_MAX:
+        raise SweepError(f"--seeds: {text!r}: seeds must be non-negative whole numbers, at most {SEED_MAX}")
     return sorted(out)
 
 
