@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from planner.fallback import brake_and_hold
 from planner.global_path import PathFollower, cost_to_go, grid_path
 from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
 from planner.mpc import MPC, MPCConfig
@@ -90,6 +91,26 @@ class NavigatorConfig:
 
 
 _HEADINGS = np.radians(np.arange(-180, 180, 5.0))  # the heading's choices
+# m, m/s, m/s^2: larger positions, velocities or accelerations are not a vehicle's (a position of 1e308 m,
+# finite, left a path of infinite length behind that failed the next plan); NaN compares false: refused too
+_PLAUSIBLE = 1e6
+
+
+def _finite_or(x, default: float) -> float:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return default
+    return x if math.isfinite(x) else default
+
+
+def _vector_or_zero(x) -> np.ndarray:
+    """x as a (3,) float vector (the fallback holds what is not finite), or zeros when it is not one."""
+    try:
+        a = np.asarray(x, dtype=float).reshape(3)
+    except (TypeError, ValueError):
+        return np.zeros(3)
+    return a
 
 
 class MPCPlanner:
@@ -323,8 +344,36 @@ class MPCPlanner:
 
     def plan(self, inp: PlannerInput) -> Trajectory:
         """The trajectory to fly from ``inp``; its solve_ms is the whole call's wall time (path search,
-        maneuver choice and MPC), not the MPC's alone (bench_mpc measures that)."""
+        maneuver choice and MPC), not the MPC's alone (bench_mpc measures that).
+
+        Never raises and always returns a finite trajectory: a stamp, position, velocity, acceleration,
+        goal or heading that is not finite, or whose size no vehicle reaches (_PLAUSIBLE), gives
+        brake-and-hold (status ``fallback:invalid_input``) and leaves the planner as it was; an error
+        inside gives brake-and-hold (``error:<type>``) and resets the planner, whose state the error may
+        have left half updated."""
         tic = time.perf_counter()
+        a_max = self.cfg.mpc.a_max_xy
+        try:
+            valid = (all(np.shape(x) == (3,) and np.all(np.abs(np.asarray(x, dtype=float)) <= _PLAUSIBLE)
+                         for x in (inp.position, inp.velocity, inp.acceleration, inp.goal))
+                     and abs(float(inp.stamp)) <= 1e9 and (inp.yaw is None or abs(float(inp.yaw)) <= 1e3))
+        except (TypeError, ValueError):
+            valid = False
+        if not valid:
+            return brake_and_hold(_finite_or(inp.stamp, 0.0), _vector_or_zero(inp.position),
+                                  _vector_or_zero(inp.velocity), a_max=a_max, status="fallback:invalid_input")
+        try:
+            traj = self._plan(inp, tic)
+            if not (isinstance(traj, Trajectory) and all(np.all(np.isfinite(a)) for a in (
+                    traj.positions, traj.velocities, traj.accelerations)) and math.isfinite(traj.t0)
+                    and (traj.yaw is None or math.isfinite(traj.yaw))):
+                raise FloatingPointError("the plan is not finite")
+            return traj
+        except Exception as e:  # noqa: BLE001 - a planner error must not stop the vehicle's loop
+            self.reset()
+            return brake_and_hold(inp.stamp, inp.position, inp.velocity, a_max=a_max, status=f"error:{type(e).__name__}")
+
+    def _plan(self, inp: PlannerInput, tic: float) -> Trajectory:
         self._obstacles = self._with_ghosts(inp)
         self._update_path(inp)
         guide = view = None
