@@ -22,7 +22,6 @@ import numpy as np
 from dodt.geometry import wrap_angle
 from experiments.environment import environment
 from experiments.episode_log import EpisodeLog, r4
-from experiments.episode_metrics import summarize
 from experiments.perception_modes import PerceptionModule, bearing_and_distance, horizontal_view, make_perception
 from planner.fallback import brake_and_hold
 from planner.mpc import MPCConfig
@@ -31,6 +30,7 @@ from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
 from planner.voxel_map import MapConfig, VoxelMap
 from sim import World, load_scenario
 from sim.controller import Reference
+from sim.scenario import MAX_DURATION
 from sim.static_grid import static_occupancy
 
 STATIC_MAPS = ("depth", "truth")
@@ -152,20 +152,26 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     if cfg.static_map not in STATIC_MAPS:
         raise ValueError(f"static_map: {cfg.static_map!r} is not one of {', '.join(STATIC_MAPS)}")
     duration = sc.duration if cfg.duration is None else cfg.duration
+    if not 0 < duration <= MAX_DURATION:  # (NaN too: it would run without a time limit)
+        raise ValueError(f"duration: expected seconds > 0 and <= {MAX_DURATION:g}, got {duration!r}")
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
+    # streamed to the file as the episode runs (a temporary one without ``out``); the metrics are read from it
     log = EpisodeLog(None if out is None else out / "log.jsonl.gz")
     t_wall = time.perf_counter()
     # images are needed by a depth-built map or by a perception module that looks at them (unknown ones do)
     render = cfg.static_map == "depth" or bool(getattr(perc, "uses_images", True))
-    world = World(sc, seed=seed, renderer=renderer, segmentation=False, render=render,
-                  frame_latency=cfg.frame_latency, render_process=cfg.render_process and render and cfg.frame_latency > 0)
-    planner = planner if planner is not None else default_planner(world.vehicle.radius)
+    world = None
     try:
+        world = World(sc, seed=seed, renderer=renderer, segmentation=False, render=render,
+                      frame_latency=cfg.frame_latency,
+                      render_process=cfg.render_process and render and cfg.frame_latency > 0)
+        planner = planner if planner is not None else default_planner(world.vehicle.radius)
         summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame)
     finally:
-        world.close()
+        if world is not None:
+            world.close()
         log.close()
     wall = time.perf_counter() - t_wall
     summary["timing"]["wall_s"] = round(wall, 2)
@@ -307,7 +313,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
 
     log.add({"k": "end", "t": round(world.time, 5), "reason": reason, "reached_goal": reason == "goal",
              "time_to_goal": None if time_to_goal is None else round(time_to_goal, 5)})
-    summary = summarize(log.records)
+    summary = log.summarize()
     summary["map_voxels_occupied"] = int(vmap.occupied_count())
     return summary
 

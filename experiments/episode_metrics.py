@@ -2,10 +2,16 @@
 
 Outcome fields are deterministic for a scenario and seed; wall-clock figures (solve and
 perception times, real-time factor) live under ``timing`` so comparisons can leave them out.
+The records are read in one pass, one at a time (``summarize_log`` reads the file): what is kept
+per record is one number (a step's length, a solve time), so the metrics of an hour's episode fit
+in a few megabytes.
 """
 from __future__ import annotations
 
 import math
+from array import array
+from collections.abc import Iterable
+from pathlib import Path
 
 import numpy as np
 
@@ -21,24 +27,68 @@ def timing_stats(values) -> dict:
             "p99": round(float(np.percentile(a, 99)), 3), "max": round(float(a.max()), 3)}
 
 
-def summarize(records: list[dict]) -> dict:
-    header = records[0]
-    end = next((r for r in reversed(records) if r["k"] == "end"), None)
-    states = [r for r in records if r["k"] == "s"]
-    plans = [r for r in records if r["k"] == "plan"]
-    frames = [r for r in records if r["k"] == "f"]
-    collisions = [r for r in records if r["k"] == "collision"]
+def summarize_log(path: Path) -> dict:
+    """The metrics of the episode log at ``path``, read one record at a time."""
+    from experiments.episode_log import iter_log
 
-    p = np.array([s["p"] for s in states]) if states else np.zeros((0, 3))
-    path_length = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0
-    clear = np.array([s["c"] for s in states]) if states else np.full((0, 3), np.inf)
-    min_clear = {k: (round(float(clear[:, i].min()), 4) if len(clear) else None)
+    return summarize(iter_log(path))
+
+
+def _finite_times(values: array, v) -> None:
+    if v is not None and math.isfinite(v):
+        values.append(v)
+
+
+def summarize(records: Iterable[dict]) -> dict:
+    """The metrics of an episode's records (a list, or an iterator over a log file), in one pass."""
+    header = end = None
+    n_states, last_state_t, prev = 0, None, None
+    steps = array("d")  # the length of every step of the path, summed at the end as numpy sums an array
+    min_clear = [math.inf, math.inf, math.inf]
+    statuses = {"plans": 0, "fallbacks": 0, "errors": 0}
+    solve_ms, perc_ms, map_ms = array("d"), array("d"), array("d")
+    n_frames = n_skipped = 0
+    collisions = []
+    for r in records:
+        k = r["k"]
+        if k == "s":
+            n_states += 1
+            last_state_t = r["t"]
+            p = r["p"]
+            if prev is not None:  # (sqrt of the squares summed in order: what the norm of an array's rows gives)
+                dx, dy, dz = p[0] - prev[0], p[1] - prev[1], p[2] - prev[2]
+                steps.append(math.sqrt(dx * dx + dy * dy + dz * dz))
+            prev = p
+            for i, c in enumerate(r["c"][:3]):
+                if c < min_clear[i]:
+                    min_clear[i] = c
+        elif k == "f":
+            n_frames += 1
+            n_skipped += bool(r.get("skipped"))
+            _finite_times(perc_ms, r.get("perc_ms"))
+            _finite_times(map_ms, r.get("map_ms"))
+        elif k == "plan":
+            statuses["plans"] += 1
+            statuses["fallbacks"] += r["status"].startswith("fallback")
+            statuses["errors"] += r["status"].startswith("error")
+            _finite_times(solve_ms, r.get("ms"))
+        elif k == "collision":
+            collisions.append(r)
+        elif k == "end":
+            end = r
+        elif k == "header" and header is None:
+            header = r
+    if header is None:
+        raise ValueError("an episode's records start with its header")
+
+    path_length = float(np.frombuffer(steps, dtype=float).sum()) if len(steps) else 0.0
+    min_clear = {k: (round(float(min_clear[i]), 4) if n_states else None)
                  for i, k in enumerate(("static", "person", "structure"))}
     finite = [v for v in min_clear.values() if v is not None]
     min_clear["overall"] = min(finite) if finite else None
 
     reached = bool(end and end.get("reached_goal"))
-    t_end = end["t"] if end else (states[-1]["t"] if states else 0.0)
+    t_end = end["t"] if end else (last_state_t if n_states else 0.0)
     time_to_goal = end.get("time_to_goal") if reached else None
     flown = time_to_goal if reached else t_end
     collided = bool(collisions)
@@ -56,7 +106,6 @@ def summarize(records: list[dict]) -> dict:
         failure = "collision"
     elif end and end.get("reason") not in (None, "goal"):
         failure = end["reason"]
-    statuses = [pl["status"] for pl in plans]
     return {
         "scenario": header["scenario"], "seed": header["seed"], "perception": header["perception"],
         "planner": header.get("planner"), "static_map": header.get("static_map", "depth"),
@@ -75,12 +124,11 @@ def summarize(records: list[dict]) -> dict:
         "mean_speed": round(path_length / flown, 3) if flown and flown > 0 else 0.0,
         "min_clearance": min_clear,
         "sim_time": round(t_end, 3),
-        "planner_stats": {"plans": len(plans), "fallbacks": sum(s.startswith("fallback") for s in statuses),
-                          "errors": sum(s.startswith("error") for s in statuses)},
-        "perception_stats": {"frames": len(frames), "skipped": sum(1 for f in frames if f.get("skipped"))},
+        "planner_stats": statuses,
+        "perception_stats": {"frames": n_frames, "skipped": n_skipped},
         "timing": {
-            "planner_solve_ms": timing_stats(pl.get("ms") for pl in plans),
-            "perception_ms": timing_stats(f.get("perc_ms") for f in frames),
-            "map_update_ms": timing_stats(f.get("map_ms") for f in frames),
+            "planner_solve_ms": timing_stats(solve_ms),
+            "perception_ms": timing_stats(perc_ms),
+            "map_update_ms": timing_stats(map_ms),
         },
     }

@@ -20,6 +20,7 @@ import math
 import time
 import warnings
 import weakref
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +44,7 @@ from sim.vehicle import GRAVITY, QUADROTOR_URDF, load_vehicle
 _GROUP_DRONE, _GROUP_STATIC = 1, 4
 _egl_owner = None  # weakref to the one World that renders with EGL (see reset)
 CLEARANCE_CAP = 1.0  # m: clearances are exact below this, reported as this value above
+CLEARANCE_LOG_LEN = 4096  # control periods of clearance history kept (34 s at 120 Hz)
 _PERSON_REACH = 0.6  # bounding-sphere radius of a person around the root, per metre of height
 
 
@@ -214,7 +216,9 @@ class World:
         self.collisions: list[CollisionEvent] = []
         self._in_contact: set[int] = set()
         self.min_clearance = {"static": CLEARANCE_CAP, "person": CLEARANCE_CAP, "structure": CLEARANCE_CAP}
-        self.clearance_log: list[tuple[float, float, float, float]] = []  # t, static, person, structure
+        # t, static, person, structure of the last CLEARANCE_LOG_LEN control periods (bounded: an episode of an
+        # hour keeps its whole history in its log file, not in memory)
+        self.clearance_log: deque[tuple[float, float, float, float]] = deque(maxlen=CLEARANCE_LOG_LEN)
         self._frame: SensorFrame | None = None
         self._render_wall_time = 0.0  # s spent inside the renderer (for benchmarks)
         self._truth: GroundTruth | None = None
