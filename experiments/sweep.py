@@ -192,19 +192,15 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
     return agg
 
 
-def _exit_with_parent(parent_pid: int, period: float = 0.5) -> None:
-    """Pool worker initializer: a daemon thread ends this worker at once when the sweep that started it is
-    gone. A sweep killed alone (kill PID, a job scheduler's SIGTERM or SIGKILL to the main process) otherwise
-    leaves its workers running: each finishes its episode and the ones queued behind it, results nobody
-    writes, then sleeps for good holding its memory (seen: orphans alive 50 minutes after their sweep, 0.6 GB each)."""
-    import threading
+def _exit_with_parent(parent_pid: int) -> None:
+    """Pool worker initializer: the worker ends at once when the sweep that started it is gone
+    (sim.parent_watch). A sweep killed alone (kill PID, a job scheduler's SIGTERM or SIGKILL to the main
+    process) otherwise leaves its workers running: each finishes its episode and the ones queued behind it,
+    results nobody writes, then sleeps for good holding its memory (seen: orphans alive 50 minutes after
+    their sweep, 0.6 GB each)."""
+    from sim.parent_watch import exit_with_parent
 
-    def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(period)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+    exit_with_parent(parent_pid)
 
 
 def run_tasks(tasks: list[tuple], jobs: int, dask_address: str | None, finished) -> None:
@@ -226,15 +222,23 @@ def _run_pool(jobs, tasks, finished) -> None:
     import multiprocessing as mp
 
     # spawn: every worker starts clean (PyBullet's EGL plugin and numba do not like forked parents).
+    before = set(mp.active_children())
     ex = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=_exit_with_parent,
                              initargs=(os.getpid(),))
+    done = False
     try:
         pending = {ex.submit(run_one, *args): key for key, args in tasks}
         while pending:
             ready, _ = wait(pending, return_when=FIRST_COMPLETED)
             for f in ready:
                 finished(pending.pop(f), f.result())
-    finally:  # on an error or Ctrl-C, do not run the queued episodes only to throw them away
+        done = True
+    finally:
+        if not done:
+            # An error, Ctrl-C or SIGTERM: the queued episodes are not run, and the running ones, whose results
+            # nobody would write, are ended now instead of being waited for.
+            for worker in set(mp.active_children()) - before:
+                worker.terminate()
         ex.shutdown(wait=True, cancel_futures=True)
 
 

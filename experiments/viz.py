@@ -145,8 +145,13 @@ def draw_drone(vis) -> None:
 # --------------------------------------------------------------------------------------- live
 
 
+# The server ends itself when the process that started it is gone (killed with SIGKILL: nothing there can
+# stop it): sim.parent_watch, given that process's pid as the first argument.
 _SERVER = """
-import sys, tornado.web
+import sys
+from sim.parent_watch import exit_with_parent
+exit_with_parent(int(sys.argv.pop(1)))
+import tornado.web
 _listen = tornado.web.Application.listen
 tornado.web.Application.listen = lambda self, port, address="127.0.0.1", **kw: _listen(self, port, address, **kw)
 from meshcat.servers.zmqserver import main
@@ -159,21 +164,26 @@ def start_meshcat_server(timeout: float = 20.0) -> tuple[subprocess.Popen, str, 
     """meshcat's server as a subprocess with both its zmq and web sockets on 127.0.0.1 (meshcat's
     own listens for browsers on every interface). Returns (process, zmq_url, web_url)."""
     log = tempfile.TemporaryFile()
-    proc = subprocess.Popen([sys.executable, "-u", "-c", _SERVER], stdout=log, stderr=subprocess.DEVNULL,
-                            stdin=subprocess.DEVNULL, start_new_session=True)
+    # Its own session: Ctrl-C in the terminal reaches this process alone, which then stops the server itself.
+    proc = subprocess.Popen([sys.executable, "-u", "-c", _SERVER, str(os.getpid())], stdout=log,
+                            stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, start_new_session=True)
     deadline = time.monotonic() + timeout
     urls: dict[str, str] = {}
-    while len(urls) < 2:
-        if proc.poll() is not None or time.monotonic() > deadline:
-            stop_meshcat_server(proc)
-            raise RuntimeError(f"the meshcat server did not start (exit status {proc.returncode})")
-        time.sleep(0.05)
-        log.seek(0)
-        for line in log.read().decode("utf-8", "replace").splitlines():
-            key, _, value = line.partition("=")
-            if key in ("zmq_url", "web_url"):
-                urls[key] = value.strip()
-    log.close()
+    try:
+        while len(urls) < 2:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"the meshcat server did not start (exit status {proc.poll()})")
+            time.sleep(0.05)
+            log.seek(0)
+            for line in log.read().decode("utf-8", "replace").splitlines():
+                key, _, value = line.partition("=")
+                if key in ("zmq_url", "web_url"):
+                    urls[key] = value.strip()
+    except BaseException:  # not started in time, or interrupted while waiting: it must not stay behind
+        stop_meshcat_server(proc)
+        raise
+    finally:
+        log.close()
     atexit.register(stop_meshcat_server, proc)
     return proc, urls["zmq_url"], urls["web_url"]
 

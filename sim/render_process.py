@@ -83,15 +83,21 @@ class RenderProcess:
         # Mesa's llvmpipe rasterises on extra threads by default; beside a busy parent on two cores they only
         # contend (corridor closed loop: 1.18x real time with them, 1.23x without). A user's setting wins.
         env.setdefault("LP_NUM_THREADS", "0")
-        self._proc = subprocess.Popen([sys.executable, "-m", "sim.render_process", str(theirs.fileno())],
-                                      pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
+        # (the child ends itself when this process is gone: sim.parent_watch)
+        self._proc = subprocess.Popen([sys.executable, "-m", "sim.render_process", str(theirs.fileno()),
+                                       str(os.getpid())], pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
         theirs.close()
         self._conn = Connection(os.dup(ours.fileno()))
         ours.close()
-        self._conn.send((scenario, seed, renderer, segmentation, light_direction))
         self._outstanding: list[int] = []
         self.render_wall_time = 0.0
-        kind, value = self._recv(_START_TIMEOUT_S, "starting")
+        try:
+            self._conn.send((scenario, seed, renderer, segmentation, light_direction))
+            kind, value = self._recv(_START_TIMEOUT_S, "starting")
+        except BaseException:  # no answer in time, the child gone, Ctrl-C: a child still building is ended now
+            self._proc.kill()
+            self.close()
+            raise
         if kind != "ready":
             self.close()
             raise RenderProcessError(f"the render process could not build the world: {value}")
@@ -156,7 +162,10 @@ class RenderProcess:
         self._proc = None
 
 
-if __name__ == "__main__":  # the child: python -m sim.render_process FD
+if __name__ == "__main__":  # the child: python -m sim.render_process FD PARENT_PID
+    from sim.parent_watch import exit_with_parent
+
+    exit_with_parent(int(sys.argv[2]))
     _conn = Connection(int(sys.argv[1]))
     try:
         _args = _conn.recv()

@@ -189,9 +189,10 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads the process table from /proc")
-def test_pool_workers_end_when_the_sweep_alone_is_killed(scenarios, tmp_path):
-    """kill -9 of the sweep's own process (not its group): its workers notice and end within seconds
-    instead of running the queued episodes for nobody and then sleeping for good."""
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
+def test_pool_workers_end_when_the_sweep_alone_is_killed(scenarios, tmp_path, how):
+    """kill -9 or kill of the sweep's own process (not its group): its workers end within seconds instead
+    of running the queued episodes for nobody and then sleeping for good (SIGTERM: the sweep ends them)."""
     cmd = _cmd("sweep", str(scenarios["short"]), "--seeds", "0:6", "--jobs", "2", "--perception", "oracle",
                "--out", str(tmp_path / "sweep"), "--quiet")
     p = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -203,7 +204,7 @@ def test_pool_workers_end_when_the_sweep_alone_is_killed(scenarios, tmp_path):
             assert time.monotonic() < deadline, "no two pool workers within 120 s"
             time.sleep(0.05)
             workers = _pool_workers(p.pid)
-        p.kill()  # the main process only
+        os.kill(p.pid, how)  # the main process only
         p.wait(timeout=30)
         deadline = time.monotonic() + 20
         while any(_alive(w) for w in workers) and time.monotonic() < deadline:
