@@ -136,7 +136,11 @@ class World:
         self.steps_per_control = r.physics // r.control
         self.steps_per_frame = r.physics // r.camera
         self._client = self._query_client = None
-        self.reset()
+        try:
+            self.reset()
+        except BaseException:  # a world that fails to build closes what it started (the render process)
+            self.close()
+            raise
 
     # ------------------------------------------------------------------ building
 
