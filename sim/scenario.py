@@ -809,6 +809,52 @@ def circle_waypoints(center, radius, clockwise=False, n=24) -> tuple[tuple[float
     return tuple((center[0] + radius * math.cos(t), center[1] + radius * math.sin(t)) for t in a)
 
 
+def _near_box(o: Obstacle, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """An axis-aligned (x, y) box holding the footprint grown by ``margin`` (a rotated box grows its
+    corners by up to margin * sqrt(2) along the axes)."""
+    lo, hi = o.aabb()
+    g = margin * 1.5 + 1e-9
+    return lo[:2] - g, hi[:2] + g
+
+
+def _first_hit(obstacles, points: np.ndarray, margin: float) -> tuple[int, int] | None:
+    """(j, i): the first obstacle, in order, whose footprint grown by margin holds one of the (N, 2) points,
+    and the first such point; None when there is none. Each obstacle is tested only against the points
+    in its box (points sorted by x, its range found by bisection): a path of many points past many
+    obstacles costs about what its points near obstacles cost."""
+    if not obstacles or not len(points):
+        return None
+    order = np.argsort(points[:, 0], kind="stable")
+    xs = points[order, 0]
+    for j, o in enumerate(obstacles):
+        lo, hi = _near_box(o, margin)
+        near = order[np.searchsorted(xs, lo[0], "left"):np.searchsorted(xs, hi[0], "right")]
+        near = near[(points[near, 1] >= lo[1]) & (points[near, 1] <= hi[1])]
+        hit = near[o.footprint_contains(points[near], margin)] if len(near) else near
+        if len(hit):
+            return j, int(hit.min())
+    return None
+
+
+def _region_covered(obstacles, region, margin: float, most: int = 256) -> bool:
+    """Whether the obstacles' footprints grown by margin cover every point of a grid over the region
+    [x0, y0, x1, y1]: every 0.1 m, or coarser on a side longer than ``most`` points (25.6 m). Each
+    obstacle is tested against the grid points in its box only."""
+    x0, y0, x1, y1 = region
+    xs = np.arange(x0, x1 + 1e-9, max(0.1, (x1 - x0) / most))
+    ys = np.arange(y0, y1 + 1e-9, max(0.1, (y1 - y0) / most))
+    covered = np.zeros((len(ys), len(xs)), bool)
+    for o in obstacles:
+        lo, hi = _near_box(o, margin)
+        ix = slice(np.searchsorted(xs, lo[0], "left"), np.searchsorted(xs, hi[0], "right"))
+        iy = slice(np.searchsorted(ys, lo[1], "left"), np.searchsorted(ys, hi[1], "right"))
+        gx, gy = np.meshgrid(xs[ix], ys[iy])
+        if gx.size:
+            inside = o.footprint_contains(np.stack([gx.ravel(), gy.ravel()], axis=1), margin)
+            covered[iy, ix] |= inside.reshape(gx.shape)
+    return bool(covered.all())
+
+
 def _check_geometry(sc: Scenario, top: _Section) -> None:
     c = sc.corridor
     for i, o in enumerate(sc.obstacles):
@@ -832,12 +878,7 @@ def _check_geometry(sc: Scenario, top: _Section) -> None:
             if not np.all(_inside_corridor(c, corners, PERSON_RADIUS)):
                 top.fail(f"{key}.region", f"region {list(p.region)} leaves the corridor "
                          f"(x in [0, {c.length}], |y| <= {c.width / 2}, minus {PERSON_RADIUS} m body radius)")
-            gx, gy = np.meshgrid(np.arange(x0, x1 + 1e-9, 0.1), np.arange(y0, y1 + 1e-9, 0.1))
-            grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
-            free = np.ones(len(grid), bool)
-            for o in sc.obstacles:
-                free &= ~o.footprint_contains(grid, PERSON_RADIUS)
-            if not np.any(free):
+            if _region_covered(sc.obstacles, p.region, PERSON_RADIUS):
                 top.fail(f"{key}.region", f"no free space in the region {list(p.region)}: obstacles cover all of it")
             if p.start is not None:
                 if not (x0 <= p.start[0] <= x1 and y0 <= p.start[1] <= y1):
@@ -865,12 +906,11 @@ def _check_geometry(sc: Scenario, top: _Section) -> None:
             q = samples[np.argmax(outside)]
             top.fail(path_key, f"the path leaves the corridor near ({q[0]:.2f}, {q[1]:.2f}) "
                      f"(x in [0, {c.length}], |y| <= {c.width / 2}, minus {PERSON_RADIUS} m body radius)")
-        for j, o in enumerate(sc.obstacles):
-            hit = o.footprint_contains(samples, PERSON_RADIUS)
-            if np.any(hit):
-                q = samples[np.argmax(hit)]
-                top.fail(path_key, f"the path walks through obstacles[{j}] ({o.kind}) near ({q[0]:.2f}, {q[1]:.2f}) "
-                         f"(the body is {PERSON_RADIUS} m wide each side)")
+        hit = _first_hit(sc.obstacles, samples, PERSON_RADIUS)
+        if hit is not None:
+            j, q = hit[0], samples[hit[1]]
+            top.fail(path_key, f"the path walks through obstacles[{j}] ({sc.obstacles[j].kind}) near "
+                     f"({q[0]:.2f}, {q[1]:.2f}) (the body is {PERSON_RADIUS} m wide each side)")
 
     for name in ("start", "goal"):
         pos = getattr(sc.drone, name)
