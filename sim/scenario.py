@@ -414,10 +414,12 @@ def load_scenario(name_or_path: str | Path, seed: int | None = None) -> Scenario
     are drawn for ``seed`` (default: the file's own seed); ``Scenario.for_seed`` draws another."""
     path = scenario_path(name_or_path)
     try:
-        if path.is_file() and path.stat().st_size > MAX_FILE_BYTES:
-            raise ScenarioError(f"{path}: {path.stat().st_size} bytes; a scenario file holds at most "
-                                f"{MAX_FILE_BYTES} bytes")
-        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark, as some editors write, is no error
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)  # no more, whatever the path is (/dev/zero)
+        if len(data) > MAX_FILE_BYTES:
+            raise ScenarioError(f"{path}: more than {MAX_FILE_BYTES} bytes; a scenario file holds at most "
+                                f"{MAX_FILE_BYTES} (1 MiB)")
+        text = data.decode("utf-8-sig")  # a byte-order mark, as some editors write, is no error
     except OSError as e:
         raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
     except UnicodeDecodeError as e:

@@ -282,6 +282,15 @@ def test_a_malformed_scenario_exits_2_naming_the_file_and_key(case, tmp_path, ca
     assert not (tmp_path / "out").exists()  # refused before any work
 
 
+@pytest.mark.parametrize("path", ["/dev/zero", "/dev/urandom", "/proc/self/mem", "/"])
+def test_a_path_that_is_not_a_scenario_file_is_refused(path, capsys):
+    """Read no further than a scenario file's bound, whatever the path (/dev/zero never ends)."""
+    if not __import__("os").path.exists(path):
+        pytest.skip(f"no {path} here")
+    code, err = _cli(["validate", path], capsys)
+    _assert_one_line(code, err, f"{path}: ")
+
+
 def test_a_utf8_file_with_a_byte_order_mark_is_read(tmp_path, capsys):
     path = tmp_path / "bom.toml"
     path.write_bytes(b"\xef\xbb\xbf" + to_toml(BASE).encode())
