@@ -659,7 +659,10 @@ def _terminated(signum, frame):
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:  # argparse's refusals (status 2, one line) and --help (0): returned like the rest
+        return e.code if isinstance(e.code, int) else 2
     # SIGTERM (kill, a job scheduler) ends the command as Ctrl-C does: through its finally blocks, which
     # close what it started (a render process, a viewer's server, a sweep's workers). Those also end on
     # their own when this process is gone (SIGKILL): sim.parent_watch.
