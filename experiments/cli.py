@@ -58,7 +58,8 @@ def _cmd_bench(args) -> int:
         if args.seeds < 1:
             raise UserError("--seeds: must be >= 1")
         duration = args.duration if args.duration else (6.0 if args.quick else None)
-        bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration)
+        rates = _parse_rates(args.rates) if args.rates else None
+        bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration, rates=rates)
         return 0
     if args.what == "planner":
         from planner.mpc import bench_mpc
@@ -90,6 +91,18 @@ def _cmd_bench(args) -> int:
     bench_perception.run_runtime(args.config, args.scenario or "corridor", seconds=args.seconds if args.seconds else 6.0,
                                  json_out=args.json)
     return 0
+
+
+def _parse_rates(text: str) -> list[float]:
+    """--rates: a comma list of frame rates in Hz, each above 0 and at most the camera's 30 Hz."""
+    try:
+        rates = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise UserError(f"--rates: expected a comma list of frame rates in Hz, got {text!r}") from None
+    bad = [r for r in rates if not 0 < r <= 30]
+    if not rates or bad:
+        raise UserError(f"--rates: each rate must be above 0 and at most the camera's 30 Hz, got {text!r}")
+    return rates
 
 
 def _check_perception(mode: str) -> None:
@@ -461,6 +474,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--configs", default=None, help="perception: comma-separated configurations")
     b.add_argument("--duration", type=float, default=None, help="perception: seconds per scenario")
     b.add_argument("--quick", action="store_true", help="perception: 6 s per scenario")
+    b.add_argument("--rates", default=None, metavar="HZ,...",
+                   help="perception: also score each configuration on the frames decimated to these rates "
+                        "(e.g. 30,15,10,5), rows named config@RATEHz")
     b.add_argument("--config", default="dodt", help="runtime: the configuration; loop: the perception mode")
     b.add_argument("--frames", type=int, default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
