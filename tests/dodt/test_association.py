@@ -403,7 +403,7 @@ def test_constant_velocity_target_does_not_overshoot():
 ])
 def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
     """A person track 8 m away, beyond the point cloud's 5.5 m but within the learned detector's
-    10 m, loses its boxes. After seen_through_after missed frames it is dropped when the depth
+    10 m, loses its boxes. From seen_through_after (7 frames) after its last box it is dropped when the depth
     image shows clearly farther than it in its image region, and coasts on otherwise."""
     import dataclasses
 
@@ -418,7 +418,7 @@ def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
     for k in range(5):  # standing, so the coasting prediction stays put
         feed(k / FPS, [np.array([8.0, 0.0, 0.9])], person=True)
     assert feed.tracker.tracks[0].is_person
-    for k in range(5, 5 + cfg.track.seen_through_after + 1):
+    for k in range(5, 5 + round(cfg.track.seen_through_after * FPS) + 1):
         feed(k / FPS, [])
         feed.tracker.drop_seen_through(depth, K, T)
     assert (feed.tracker.tracks == []) == dropped
@@ -433,13 +433,13 @@ def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
 ])
 def test_an_unseen_coasting_person_track_is_dropped(case, dropped):
     """A standing person track 4 m in front of the camera loses its detections. After
-    learned.unseen_after missed frames it is dropped when its place is in full view, nothing
+    learned.unseen_after (4 frames here) it is dropped when its place is in full view, nothing
     nearer hides it and no 2D person box of the frame overlaps its image box."""
     from tests.dodt.synthetic import camera_pose, render_depth
     from dodt.frames import CameraIntrinsics
 
     cfg = DODTConfig()
-    after = 0 if case == "off" else 4
+    after = 0 if case == "off" else 4 / FPS
     cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after))
     K, T = CameraIntrinsics(), camera_pose(z=1.2)
     boxes = [((9.0, -3.0, 0.0), (9.2, 3.0, 3.0))]  # a wall 5 m behind the place
@@ -486,13 +486,13 @@ def test_the_pipeline_drops_an_unseen_person_track(after, gone):
     """DODT.process applies the unseen-person rule with the learned module's 2D boxes of the frame:
     a person track whose boxes stop, with nothing behind it within the camera's range (no valid
     depth: the seen-through rule cannot drop it), is gone 8 frames later with
-    learned.unseen_after = 6, and still coasting with the rule off."""
+    learned.unseen_after = 6 frames, and still coasting with the rule off."""
     from dodt.frames import CameraIntrinsics, SensorFrame
     from dodt.pipeline import DODT
     from tests.dodt.synthetic import camera_pose
 
     cfg = DODTConfig()
-    cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after))
+    cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after / FPS))
     K, T = CameraIntrinsics(), camera_pose(z=1.2)
     depth_mm = np.zeros((K.height, K.width), np.uint16)
     color = np.zeros((K.height, K.width, 3), np.uint8)
