@@ -262,7 +262,7 @@ def test_one_moving_box_keeps_one_id(name):
         assert not out[0].coasting
     o = out[0]
     np.testing.assert_allclose(o.center, walker(t), atol=0.05)
-    np.testing.assert_allclose(o.velocity, (0.0, 1.0, 0.0), atol=0.1)
+    np.testing.assert_allclose(o.filter_velocity, (0.0, 1.0, 0.0), atol=0.1)
     assert o.age == pytest.approx(59 / FPS)
     assert o.history.shape[1] == 4 and len(o.history) == 60
     np.testing.assert_allclose(o.history[-1, 1:], walker(t), atol=0.05)  # filtered centres
@@ -290,7 +290,7 @@ def test_track_coasts_through_a_short_gap_and_keeps_its_id(name):
         out = feed(t, [walker(t)])
         assert [o.id for o in out] == [1]
         assert not out[0].coasting
-    np.testing.assert_allclose(out[0].velocity[:2], (0.0, 1.0), atol=0.1)
+    np.testing.assert_allclose(out[0].filter_velocity[:2], (0.0, 1.0), atol=0.1)
 
 
 @pytest.mark.parametrize("name", PRESETS)
@@ -392,7 +392,7 @@ def test_constant_velocity_target_does_not_overshoot():
     for k in range(40):
         t = k / FPS
         out = feed(t, [walker(t)])
-        speeds.append(out[0].velocity[1])
+        speeds.append(out[0].filter_velocity[1])
     assert max(speeds) < 1.1
 
 
@@ -568,3 +568,21 @@ def test_velocity_is_differenced_between_detections_of_one_kind(same_kind):
         assert max(errs) < 0.05
     else:
         assert np.mean(errs) > 0.15
+
+
+def test_a_static_track_reports_no_velocity_and_keeps_its_filter_velocity():
+    """A track that identification has not called dynamic (here: never identified) says it is
+    still: zero velocity and acceleration, whatever its filter estimates, which
+    ``filter_velocity`` and ``filter_acceleration`` keep."""
+    feed = Feed(DODTConfig())
+    for k in range(20):
+        out = feed(k / FPS, [walker(k / FPS)])
+    o = out[0]
+    assert not o.dynamic
+    assert np.all(o.velocity == 0) and np.all(o.acceleration == 0)
+    assert o.filter_velocity[1] > 0.5 and o.filter_acceleration.shape == (3,)
+    assert o.to_json()["velocity"] == [0.0, 0.0, 0.0] and o.to_json()["filter_velocity"][1] > 0.5
+    # dynamic, it reports the filter's velocity
+    feed.tracker.tracks[0].geometric_dynamic = True
+    o = feed.tracker.tracks[0].output(19 / FPS)
+    assert o.dynamic and np.array_equal(o.velocity, o.filter_velocity)
