@@ -236,11 +236,27 @@ class IdentificationConfig:
 
 @dataclass(frozen=True)
 class LearnedConfig:
-    """The optional learned person detector, YOLO-MAD (paper Sec. III-B; ref sections 4-5)."""
+    """The optional learned person detector, YOLO-MAD (paper Sec. III-B; ref sections 4-5).
+
+    The model shipped in dodt/models is trained on this project's simulator renders only; on a
+    real camera's images bring a detector trained on real ones (``model`` and ``layout``: an ONNX
+    export of a COCO-trained YOLOv8 / YOLO11 / YOLOv5 / YOLOX, dodt.learned.yolo)."""
 
     enabled: bool = False
-    model: str = ""  # ONNX file with its .json beside it; "" -> the model shipped in dodt/models
-    score_threshold: float | None = None  # None -> the value recorded with the model
+    # ONNX file ("" -> the model shipped in dodt/models). Ours has its .json record beside it; a
+    # model of a YOLO layout needs none
+    model: str = ""
+    # the model's output layout: "auto" (ours, or a YOLO layout told by the output's shape), "dodt",
+    # "yolov8" (Ultralytics YOLOv8 / YOLO11), "yolov5" (decoded in the graph: YOLOv5, YOLOv7), "yolox"
+    layout: str = "auto"
+    person_class: int = 0  # the person class of a multi-class YOLO model (COCO: 0)
+    input_size: tuple[int, int] | None = None  # (width, height) for a model whose input size is not fixed
+    # a YOLO model's input: colour order ("rgb" / "bgr"), pixel scale (1/255 or 1) and letterbox
+    # ("center", "top-left", "none"); None: its layout's (dodt.learned.yolo.PREPROCESS)
+    channels: str | None = None
+    pixel_scale: float | None = None
+    letterbox: str | None = None
+    score_threshold: float | None = None  # None -> the value recorded with the model (0.3 without a record)
     nms_iou: float = 0.45  # ref
     # ours: Gaussian soft-NMS (dodt.learned.layout.soft_nms) with this sigma instead of NMS at
     # nms_iou (0). People walking close together, or one partly hidden behind another, have
