@@ -403,3 +403,71 @@ class DODTConfig:
     # Hz: the frame rate the per-frame constants (KalmanConfig's Q, TrackConfig.size_smoothing) are
     # given for, the reference code's 30 Hz timers; at another rate they are scaled by dt x this
     reference_rate: float = 30.0
+
+
+def override(cfg: DODTConfig, assignments) -> DODTConfig:
+    """``cfg`` with ``section.field=value`` assignments applied (``name=value`` for a top-level
+    field), each value read as the field's type: a number, true / false, a comma list for a tuple,
+    none for an optional field. A ValueError names the assignment and what is wrong."""
+    import dataclasses
+    import typing
+
+    for text in assignments:
+        key, sep, raw = str(text).partition("=")
+        key, raw = key.strip(), raw.strip()
+        if not sep or not key:
+            raise ValueError(f"--set {text!r}: expected section.field=value, e.g. kalman.q_pos=0.02")
+        path = key.split(".")
+        if len(path) > 2:
+            raise ValueError(f"--set {key}: expected section.field or a top-level field")
+        owner = cfg if len(path) == 1 else getattr(cfg, path[0], None)
+        if not dataclasses.is_dataclass(owner) or (len(path) == 2 and path[0] not in {f.name for f in dataclasses.fields(cfg)}):
+            sections = ", ".join(f.name for f in dataclasses.fields(cfg) if dataclasses.is_dataclass(getattr(cfg, f.name)))
+            raise ValueError(f"--set {key}: no section {path[0]!r}; sections: {sections}")
+        name = path[-1]
+        hints = typing.get_type_hints(type(owner))
+        if name not in hints or dataclasses.is_dataclass(getattr(owner, name)):
+            raise ValueError(f"--set {key}: {type(owner).__name__} has no field {name!r}")
+        try:
+            value = _parse_value(raw, hints[name])
+        except ValueError as e:
+            raise ValueError(f"--set {key}={raw}: {e}") from None
+        new = dataclasses.replace(owner, **{name: value})
+        cfg = new if len(path) == 1 else dataclasses.replace(cfg, **{path[0]: new})
+    return cfg
+
+
+def _parse_value(raw: str, hint):
+    import typing
+
+    args = typing.get_args(hint)
+    optional = type(None) in args
+    if raw.lower() in ("none", "null") and optional:
+        return None
+    if optional:
+        hint = next(a for a in args if a is not type(None))
+        args = typing.get_args(hint)
+    origin = typing.get_origin(hint)
+    if origin is tuple:
+        parts = [p.strip() for p in raw.split(",") if p.strip()]
+        item = args[0] if args else str
+        if len(args) > 1 and args[-1] is not Ellipsis and len(parts) != len(args):
+            raise ValueError(f"expected {len(args)} comma-separated values")
+        return tuple(_parse_value(p, item) for p in parts)
+    if hint is bool:
+        if raw.lower() in ("true", "1", "yes", "on"):
+            return True
+        if raw.lower() in ("false", "0", "no", "off"):
+            return False
+        raise ValueError("expected true or false")
+    if hint is int:
+        try:
+            return int(raw)
+        except ValueError:
+            raise ValueError("expected a whole number") from None
+    if hint is float:
+        try:
+            return float(raw)
+        except ValueError:
+            raise ValueError("expected a number") from None
+    return raw  # a string
