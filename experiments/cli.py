@@ -13,6 +13,7 @@ from pathlib import Path
 
 from dodt.config import LearnedConfig
 from dodt.learned.model import ModelError
+from experiments.sequences import SequenceError
 from sim.scenario import ScenarioError, load_scenario, shipped_scenarios
 
 
@@ -28,7 +29,7 @@ def _cmd_simulate(args) -> int:
     if args.duration is not None and args.duration <= 0:
         raise UserError("--duration: must be > 0")
     s = simulate(args.scenario, args.seed, Path(args.out), duration=args.duration, save_every=args.save_every,
-                 renderer=args.renderer, segmentation=not args.no_segmentation)
+                 renderer=args.renderer, segmentation=not args.no_segmentation, fmt=args.format)
     print(f"{s['scenario']} seed {s['seed']}: {s['sim_time']:.2f} s simulated in {s['wall_time_s']:.1f} s "
           f"({s['renderer']} renderer), {s['frames_saved']} frames written to {args.out}")
     print(f"collisions: {s['collision_count']}, min clearance [m]: " +
@@ -460,6 +461,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--save-every", type=int, default=1, help="write every k-th camera frame")
     s.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
     s.add_argument("--no-segmentation", action="store_true", help="skip the segmentation images (faster)")
+    s.add_argument("--format", choices=("dodt", "tum"), default="dodt",
+                   help="dodt (default: depth/, color/, sensor.json) or tum (a TUM RGB-D sequence: rgb/, depth/, "
+                        "rgb.txt, depth.txt, groundtruth.txt, intrinsics.json), with the ground truth beside")
     s.set_defaults(func=_cmd_simulate)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
@@ -606,6 +610,10 @@ def build_parser() -> argparse.ArgumentParser:
     pk.add_argument("--quality", type=int, default=90, help="WebP quality 1-100, or 101 for lossless")
     pk.set_defaults(func=_cmd_pack_detector_data)
 
+    from experiments.perceive import add_parser as add_perceive
+
+    add_perceive(sub)
+
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)
 
@@ -619,7 +627,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ScenarioError, UserError, ModelError) as e:
+    except (ScenarioError, UserError, ModelError, SequenceError) as e:
         print(f"dodt-nav: error: {e}", file=sys.stderr)
         return 2
     except OSError as e:
