@@ -258,8 +258,8 @@ class Track:
 
     def output(self, stamp: float) -> TrackedObstacle:
         """The track as reported. A track identified static reports zero velocity and acceleration:
-        its filter's velocity is then the drift of a box whose visible part changes (up to 1.5 m/s
-        at the 95th percentile on static_only), not motion; ``filter_velocity`` keeps it."""
+        its filter's velocity is then mostly the drift of a box whose visible part changes as the
+        camera moves, not motion; ``filter_velocity`` and ``filter_acceleration`` keep them."""
         h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
         dynamic = self.dynamic
         v = np.array([self.kf.velocity[0], self.kf.velocity[1], 0.0])

@@ -257,3 +257,15 @@ def test_a_simulated_run_in_the_tum_format_gives_the_benchmarks_figures(tmp_path
         assert got[k] == bench[k], k
     for k in ("pos_err", "vel_err", "static_speed_p95", "still_speed_p95"):
         assert got[k] == pytest.approx(bench[k], rel=1e-9, abs=1e-12), k
+
+
+@pytest.mark.slow
+def test_a_simulate_output_in_its_own_format_is_read_too(tmp_path):
+    """The project's own `simulate` output (sensor.json, millimetre depth, poses rounded to 1e-6)
+    is a sequence too, scored against its truth."""
+    assert main(["simulate", "wall_pass", "--seed", "0", "--duration", "1", "--out", str(tmp_path / "sim")]) == 0
+    s = perceive(tmp_path / "sim", tmp_path / "out", images=True)
+    assert s["format"] == "dodt-sim" and s["poses"].endswith("sensor.json")
+    saved = json.loads((tmp_path / "sim" / "summary.json").read_text())["frames_saved"]
+    assert s["frames_processed"] == saved == s["metrics"]["frames"]
+    assert s["depth_scale_m"] == 0.001 and s["sequence_counters"]["unreadable"] == 0
