@@ -12,6 +12,10 @@ Two layouts are read:
 - This project's ``dodt-nav simulate`` output: ``sensor.json`` with the intrinsics and each
   frame's stamp, pose and image paths (depth in millimetres).
 
+Depth in whole millimetres (every value of a frame a multiple of depth_factor / 1000: a millimetre
+sensor's depth converted, as ``simulate --format tum`` writes it) is read as millimetres, so its
+metres are bit for bit those the sensor's millimetres give.
+
 Intrinsics come from a small file (JSON ``{"fx", "fy", "cx", "cy"}``, optionally ``width``,
 ``height`` and ``depth_factor``; or a text line ``fx fy cx cy``), from options, or from an
 ``intrinsics.json`` in the sequence folder. Frames whose files cannot be read, or that have no
@@ -217,12 +221,17 @@ class Sequence:
         has no pose (counted). ``fixed_pose``: the pose of every frame (a fixed camera);
         ``pose_transform``: a transform applied to every pose from the file (T_new_world)."""
         K = self.intrinsics
+        per_mm = 0.001 / self.depth_scale  # depth units per millimetre
+        mm_units = int(round(per_mm)) if per_mm >= 2 and abs(per_mm - round(per_mm)) < 1e-9 else None
         for ref in self.refs:
             depth = _read_png(ref.depth, np.uint16)
             if depth is None or depth.shape != (K.height, K.width):
                 self.counters["unreadable"] += 1
                 yield ref, None
                 continue
+            scale = self.depth_scale
+            if mm_units is not None and not np.any(depth % mm_units):  # whole millimetres
+                depth, scale = depth // mm_units, 0.001
             color = None
             if ref.color is not None:
                 bgr = _read_png(ref.color, np.uint8, color=True)
@@ -238,7 +247,7 @@ class Sequence:
             if pose_transform is not None and fixed_pose is None:
                 T = pose_transform @ T
             yield ref, SensorFrame(depth=depth, color=color, intrinsics=K, T_world_camera=np.array(T, float),
-                                   stamp=ref.stamp, seq=ref.seq, depth_scale=self.depth_scale)
+                                   stamp=ref.stamp, seq=ref.seq, depth_scale=scale)
 
     def depth_m(self, ref: FrameRef) -> np.ndarray | None:
         """One frame's depth in metres (0: none), or None when it cannot be read."""

@@ -167,8 +167,9 @@ def test_poses_are_interpolated_and_a_frame_without_one_is_counted():
 
 
 def test_the_tum_writer_round_trip(tmp_path):
-    """Frames written by TumWriter read back with the same stamps, poses and depth (5000 per metre:
-    a millimetre image exactly), the colour registered by stamp."""
+    """Frames written by TumWriter read back with the same stamps, poses and depth (5000 per metre
+    on disk, read back as the millimetres it was written from), the colour registered by stamp;
+    depth that is no whole number of millimetres is read at 5000 per metre."""
     rng = np.random.default_rng(0)
     frames = []
     for k in range(3):
@@ -184,11 +185,20 @@ def test_the_tum_writer_round_trip(tmp_path):
     got = [f for _, f in seq.frames()]
     assert [f.stamp for f in got] == [f.stamp for f in frames]
     for a, b in zip(frames, got):
-        np.testing.assert_array_equal(b.depth, a.depth.astype(np.uint32) * 5)
-        np.testing.assert_allclose(b.depth_m(), a.depth_m(), atol=1e-6)
+        np.testing.assert_array_equal(b.depth, a.depth)
+        assert b.depth_scale == 0.001
+        np.testing.assert_array_equal(b.depth_m(), a.depth_m())
+        on_disk = cv2.imread(str(tmp_path / "depth" / f"{a.stamp!r}.png"), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(on_disk, np.where(a.depth.astype(np.uint32) * 5 <= 65535, a.depth * 5, 0))
         np.testing.assert_allclose(b.T_world_camera, a.T_world_camera, atol=1e-12)
         np.testing.assert_array_equal(b.color, a.color)
     assert seq.intrinsics == K
+    # a frame in tenths of millimetres is read at 5000 per metre
+    odd = cv2.imread(str(tmp_path / "depth" / f"{frames[0].stamp!r}.png"), cv2.IMREAD_UNCHANGED)
+    odd[0, 0] = 12343
+    cv2.imwrite(str(tmp_path / "depth" / f"{frames[0].stamp!r}.png"), odd)
+    first = next(open_sequence(tmp_path).frames())[1]
+    assert first.depth_scale == pytest.approx(1 / 5000) and first.depth[0, 0] == 12343
 
 
 @pytest.mark.parametrize("setup, kwargs, match", [
