@@ -215,11 +215,13 @@ class Sequence:
     pose_source: str | None  # the file the poses come from, or None
     counters: dict = field(default_factory=lambda: {"unreadable": 0, "no_pose": 0, "no_color": 0})
 
-    def frames(self, fixed_pose: np.ndarray | None = None,
-               pose_transform: np.ndarray | None = None) -> Iterator[tuple[FrameRef, SensorFrame | None]]:
+    def frames(self, fixed_pose: np.ndarray | None = None, pose_transform: np.ndarray | None = None,
+               color: bool = True) -> Iterator[tuple[FrameRef, SensorFrame | None]]:
         """(reference, frame) per frame; the frame is None where its images cannot be read or it
         has no pose (counted). ``fixed_pose``: the pose of every frame (a fixed camera);
-        ``pose_transform``: a transform applied to every pose from the file (T_new_world)."""
+        ``pose_transform``: a transform applied to every pose from the file (T_new_world);
+        ``color``: False leaves the colour images unread (frames without colour, not counted)."""
+        want_color = color
         K = self.intrinsics
         per_mm = 0.001 / self.depth_scale  # depth units per millimetre
         mm_units = int(round(per_mm)) if per_mm >= 2 and abs(per_mm - round(per_mm)) < 1e-9 else None
@@ -233,11 +235,11 @@ class Sequence:
             if mm_units is not None and not np.any(depth % mm_units):  # whole millimetres
                 depth, scale = depth // mm_units, 0.001
             color = None
-            if ref.color is not None:
+            if want_color and ref.color is not None:
                 bgr = _read_png(ref.color, np.uint8, color=True)
                 if bgr is not None and bgr.shape[:2] == depth.shape:
                     color = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-            if color is None:
+            if want_color and color is None:
                 self.counters["no_color"] += 1
             T = fixed_pose if fixed_pose is not None else ref.T_world_camera
             if T is None:
