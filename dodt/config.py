@@ -9,8 +9,8 @@ Time, not frames: every history window of the pipeline (the cloud voted against,
 pseudo-measurements, the consistency of candidates, the hysteresis, the person label, when a
 coasting track is checked) is a span of seconds, so one configuration serves a camera at any
 frame rate. The reference code counts frames of its 30 Hz timers; each span below is that count
-at 30 Hz (a window of n frames spans n - 1 frame periods). A window of span S holds the frames
-back to the newest one at least S old, so at a low rate it still holds two frames. Per-frame
+at 30 Hz (a window of n frames spans n - 1 frame periods), counted in frames at the measured
+frame period (dodt.windows). Per-frame
 constants (the process noise Q, the size smoothing) are given for one frame at
 ``DODTConfig.reference_rate`` and scaled by dt x that rate.
 """
@@ -212,8 +212,9 @@ class IdentificationConfig:
     # px; points that were this close to the image border back then are not voted on: the cloud
     # skips the border (depth margin 10 px), and an edge of the view cuts obstacles (ours)
     fov_margin_px: float = 15.0
-    # candidate in every frame over this span to become dynamic: ref default 3 consecutive frames
-    # (ours too; 2 / 30 s). The authors' navigation configuration uses 5 (autonomous_flight cfg/dynamic_navigation); we used 5 while a
+    # candidate in every frame within this span to become dynamic: ref default 3 consecutive frames
+    # (ours too; 2 / 30 s; at 10 Hz and below, where a frame interval is longer, the frame itself:
+    # dodt.windows.FrameClock.frames_within). The authors' navigation configuration uses 5 (autonomous_flight cfg/dynamic_navigation); we used 5 while a
     # side wall seen at a grazing angle from the flying drone blinked dynamic with 3. Measured now
     # (recorded perception scenarios, seeds 0-1): 3 reports a person coming into view 2 frames
     # sooner, recall +1.2 points, FP 0.78 -> 0.90 %, and every false dynamic report in the drone

@@ -10,7 +10,7 @@ Per track and frame, a candidate test:
    than a person walks, or the point was near the end of the depth range); too many left out
    and the frame says nothing;
 3. candidate if votes / valid points >= T_ratio.
-A track is dynamic once every frame over the last ``consistency_span`` seconds was a candidate,
+A track is dynamic once every frame within the last ``consistency_span`` seconds was a candidate,
 and stays dynamic while at least ``force_dynamic_fraction`` of its frames over the last
 ``force_dynamic_span`` were dynamic (windows of time: dodt.windows). A
 track flagged a person by a learned detector is dynamic at once, for as long as the flag lasts:
@@ -91,7 +91,7 @@ def decide(candidates: list[bool], dynamic_history: list[bool], cfg: Identificat
     the frames before this one. The spans are counted in frames at ``clock``'s frame period
     (default: the reference rate)."""
     clock = clock or FrameClock()
-    n = clock.intervals(cfg.consistency_span) + 1
+    n = clock.frames_within(cfg.consistency_span)
     if len(candidates) >= n and all(candidates[-n:]):
         return True
     if cfg.release_span is not None and dynamic_history and dynamic_history[-1] and \

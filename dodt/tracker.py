@@ -230,8 +230,8 @@ class Track:
                 votes, valid, skipped = vote(voters, near, dt, v_box, T_then, K, max_depth, cfg)
         cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
         self.candidates.append(cand)
-        keep_last(self.candidates, max(self.clock.intervals(cfg.consistency_span),
-                                       self.clock.intervals(cfg.release_span)) + 1)
+        keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
+                                       self.clock.intervals(cfg.release_span) + 1))
         # The geometric label (candidates, consistency, the hysteresis and the force-dynamic lock)
         # sees only the geometric evidence; the person label adds to it and does not feed it. Fed
         # into it, ten person frames locked a static obstacle dynamic for good (force_dynamic):

@@ -122,14 +122,15 @@ def test_consistency_and_hysteresis():
     assert decide_at([False], [False] * (w - 10) + [True] * 10)
 
 
-@pytest.mark.parametrize("rate", [60.0, 15.0, 10.0, 5.0])
+@pytest.mark.parametrize("rate", [60.0, 20.0, 15.0, 10.0, 5.0])
 def test_consistency_is_a_span_of_time(rate):
-    """At any frame rate a track turns dynamic once its candidates span consistency_span: one
-    frame is never enough, at 60 Hz it takes 5."""
-    n = frames_of(CFG.consistency_span, rate)
-    assert n == {60.0: 5, 15.0: 2, 10.0: 2, 5.0: 2}[rate]
-    assert not decide_at([True] * (n - 1), [], rate=rate)
+    """At any frame rate a track turns dynamic once every frame within consistency_span (2 / 30 s)
+    was a candidate: 3 frames at 30 Hz, 5 at 60 Hz, 2 at 15 and 20 Hz, and at 10 Hz and below,
+    where a frame interval is longer than the span, the frame itself."""
+    n = {60.0: 5, 20.0: 2, 15.0: 2, 10.0: 1, 5.0: 1}[rate]
+    assert not decide_at([True] * (n - 1) if n > 1 else [False], [], rate=rate)
     assert decide_at([True] * n, [], rate=rate)
+    assert not decide_at([True] * n + [False], [], rate=rate)
     w = frames_of(CFG.force_dynamic_span, rate)
     assert decide_at([False], [True] * w, rate=rate)
     assert not decide_at([False], [False] * w, rate=rate)
