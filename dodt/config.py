@@ -4,6 +4,15 @@
 (onboard_detector cfg/detector_param.yaml, see shared/reference/dodt-reference-code.md);
 "ours" = chosen here, with the reason beside it. Ablations and baselines are configurations
 (dodt.presets), not forks of the code.
+
+Time, not frames: every history window of the pipeline (the cloud voted against, the span of the
+pseudo-measurements, the consistency of candidates, the hysteresis, the person label, when a
+coasting track is checked) is a span of seconds, so one configuration serves a camera at any
+frame rate. The reference code counts frames of its 30 Hz timers; each span below is that count
+at 30 Hz (a window of n frames spans n - 1 frame periods), counted in frames at the measured
+frame period (dodt.windows). Per-frame
+constants (the process noise Q, the size smoothing) are given for one frame at
+``DODTConfig.reference_rate`` and scaled by dt x that rate.
 """
 from __future__ import annotations
 
@@ -22,6 +31,11 @@ class DepthConfig:
     margin: int = 10  # px border skipped, ref depth_filter_margin
     skip: int = 2  # every skip-th row and column, ref depth_skip_pixel
     max_frame_gap: float = 0.5  # s; a gap longer than this and than the coasting time restarts the tracks (ours)
+    # s; a stamp farther ahead than this of the last processed frame is taken for a corrupt stamp and
+    # the frame is skipped (counted as skipped_time), unless the next frames confirm the jump: a
+    # single absurd stamp (say 1e300) would otherwise make every later frame look older (ours)
+    max_time_jump: float = 10.0
+    confirm_jump_frames: int = 3  # frames in a row whose stamps continue a jump make it the new time
 
 
 @dataclass(frozen=True)
@@ -123,7 +137,7 @@ class KalmanConfig:
     r_pos: float = 0.04  # ref e_r_pos
     r_vel: float = 0.1  # ref e_r_vel is 0.3; see p0
     r_acc: float = 0.6  # ref e_r_acc
-    averaging_frames: int = 10  # pseudo-measurements span up to this many frames, ref
+    averaging_time: float = 10 / 30  # s; pseudo-measurements span up to this, ref averaging_frames 10 at 30 Hz
     # paper: position, velocity and acceleration "measured" (pseudo-measurements, H = I);
     # position: only the position is measured and the model's white noise (q_white) drives it
     measurement: str = "paper"
@@ -132,7 +146,7 @@ class KalmanConfig:
     # lattice, so their median moves in steps and the mean does not: on the recorded perception
     # scenarios the velocity error was 0.32 (box), 0.175 (median) and 0.157 m/s (mean)
     position_source: str = "mean"
-    # ours: the pseudo-measured velocity (a difference over up to averaging_frames) is the
+    # ours: the pseudo-measured velocity (a difference over up to averaging_time) is the
     # velocity of the middle of its span, which on a turn points turn rate x span / 2 behind.
     # It is rotated forward by the sustained turn rate, measured over turn_window seconds
     # (dodt.tracker.Track._turn_compensated); 0 turns it off (the paper). Recorded perception
@@ -150,14 +164,14 @@ class KalmanConfig:
 @dataclass(frozen=True)
 class TrackConfig:
     coast_time: float = 1.0  # s a track survives without detections on its prediction (beyond the paper)
-    # a coasting track is dropped when, after this many missed frames, this fraction of its image
+    # a coasting track is dropped when, this long after its last detection, this fraction of its image
     # region is seen this far behind where it should be (it is not there). Measured on circles,
     # corridor and wall_pass: 0.9 / 0.5 m gave FP 4.9 %, recall 92.4 %; 0.75 / 0.3 m 1.8 %, 91.0 %.
     # After 3 frames, 17 of the 60 tracks dropped on the recorded scenarios (seeds 0-1) were dynamic
     # and within 0.6 m of a visible person who had only stepped off the prediction; after 7 (with
     # the DBSCAN cut at 0.8 m / 0.45), seeds 0-2: recall 93.3 -> 94.4 %, vel 0.171 -> 0.165 m/s,
     # pos 0.077 -> 0.079 m, FP 1.5 -> 1.6 % (seed 2 held out from the tuning: recall 91.8 -> 93.2 %)
-    seen_through_after: int = 7
+    seen_through_after: float = 7 / 30  # s: 7 missed frames at 30 Hz
     seen_through_fraction: float = 0.75
     seen_through_margin: float = 0.3  # m
     # a person track (dynamic at once by the learned detector's label) that misses its detection
@@ -169,15 +183,17 @@ class TrackConfig:
     # the coasting starts of dodt's tracks are that fast, nearly all static-labelled pieces of wall
     # seen from the moving drone, and dropping them there is not measured
     max_coast_speed: float = 2.5  # m/s
-    history: int = 100  # states kept per track, ref history_size
-    output_history: float = 3.0  # s of centre history in the output (the paper's figures show 3 s)
-    size_smoothing: float = 0.3  # output size: exponential smoothing weight of the new detection (ours)
+    output_history: float = 3.0  # s of centre history kept and output (the paper's figures show 3 s)
+    # output size: exponential smoothing weight of the new detection, per frame at reference_rate (ours)
+    size_smoothing: float = 0.3
 
 
 @dataclass(frozen=True)
 class IdentificationConfig:
     method: str = "voting"  # voting (paper), velocity (velocity threshold only, baselines)
-    frame_skip: int = 5  # k: compare with the cloud k frames back, ref frame_skip
+    # s: vote against the cloud this long back (the newest at least this old), ref frame_skip k = 5
+    # frames at 30 Hz
+    vote_span: float = 5 / 30
     velocity_threshold: float = 0.15  # m/s, T_vel on the filtered speed, ref dynamic_velocity_threshold
     vote_velocity: float = 0.15  # m/s, T_vote per point, ref
     vote_ratio: float = 0.8  # T_ratio, ref dynamic_voting_threshold
@@ -196,21 +212,24 @@ class IdentificationConfig:
     # px; points that were this close to the image border back then are not voted on: the cloud
     # skips the border (depth margin 10 px), and an edge of the view cuts obstacles (ours)
     fov_margin_px: float = 15.0
-    # consecutive candidate frames to become dynamic: ref default 3 (ours too). The authors'
-    # navigation configuration uses 5 (autonomous_flight cfg/dynamic_navigation); we used 5 while a
+    # candidate in every frame within this span to become dynamic: ref default 3 consecutive frames
+    # (ours too; 2 / 30 s; at 10 Hz and below, where a frame interval is longer, the frame itself:
+    # dodt.windows.FrameClock.frames_within). The authors' navigation configuration uses 5 (autonomous_flight cfg/dynamic_navigation); we used 5 while a
     # side wall seen at a grazing angle from the flying drone blinked dynamic with 3. Measured now
     # (recorded perception scenarios, seeds 0-1): 3 reports a person coming into view 2 frames
     # sooner, recall +1.2 points, FP 0.78 -> 0.90 %, and every false dynamic report in the drone
     # scenario (corridor) is a person track drifting off its person, no wall. Corridor sweep, seeds
     # 0-19: 45 % success with 3, 50 % with the previous settings (within noise: re-flying the 6
     # seeds that failed with 3 using 5 gave 1 success).
-    consistency: int = 3
-    # ours: a dynamic track turns static only after this many frames in a row that were no
-    # candidates (0: at the first one, as the reference code does for a track younger than
-    # force_dynamic_window, whose label then blinks with the vote)
-    release_frames: int = 3
-    force_dynamic_window: int = 30  # ref frames_force_dynamic_check_range
-    force_dynamic_count: int = 10  # ref frames_force_dynamic
+    consistency_span: float = 2 / 30  # s
+    # ours: a dynamic track turns static only when no frame over this span was a candidate (3 frames
+    # in a row at 30 Hz; None: at the first one, as the reference code does for a track younger than
+    # the force-dynamic window, whose label then blinks with the vote)
+    release_span: float | None = 2 / 30
+    # a track dynamic in at least this fraction of its frames over this span stays dynamic: ref
+    # frames_force_dynamic 10 of frames_force_dynamic_check_range 30 at 30 Hz
+    force_dynamic_span: float | None = 29 / 30  # s; None: no force-dynamic lock
+    force_dynamic_fraction: float = 1 / 3
     constrain_size: bool = False  # ref constrain_size: dynamic only if about person-sized
     target_size: tuple[float, float, float] = (0.5, 0.5, 1.7)  # m, ref target_object_size
     target_size_tolerance: float = 0.5  # m
@@ -218,11 +237,27 @@ class IdentificationConfig:
 
 @dataclass(frozen=True)
 class LearnedConfig:
-    """The optional learned person detector, YOLO-MAD (paper Sec. III-B; ref sections 4-5)."""
+    """The optional learned person detector, YOLO-MAD (paper Sec. III-B; ref sections 4-5).
+
+    The model shipped in dodt/models is trained on this project's simulator renders only; on a
+    real camera's images bring a detector trained on real ones (``model`` and ``layout``: an ONNX
+    export of a COCO-trained YOLOv8 / YOLO11 / YOLOv5 / YOLOX, dodt.learned.yolo)."""
 
     enabled: bool = False
-    model: str = ""  # ONNX file with its .json beside it; "" -> the model shipped in dodt/models
-    score_threshold: float | None = None  # None -> the value recorded with the model
+    # ONNX file ("" -> the model shipped in dodt/models). Ours has its .json record beside it; a
+    # model of a YOLO layout needs none
+    model: str = ""
+    # the model's output layout: "auto" (ours, or a YOLO layout told by the output's shape), "dodt",
+    # "yolov8" (Ultralytics YOLOv8 / YOLO11), "yolov5" (decoded in the graph: YOLOv5, YOLOv7), "yolox"
+    layout: str = "auto"
+    person_class: int = 0  # the person class of a multi-class YOLO model (COCO: 0)
+    input_size: tuple[int, int] | None = None  # (width, height) for a model whose input size is not fixed
+    # a YOLO model's input: colour order ("rgb" / "bgr"), pixel scale (1/255 or 1) and letterbox
+    # ("center", "top-left", "none"); None: its layout's (dodt.learned.yolo.PREPROCESS)
+    channels: str | None = None
+    pixel_scale: float | None = None
+    letterbox: str | None = None
+    score_threshold: float | None = None  # None -> the value recorded with the model (0.3 without a record)
     nms_iou: float = 0.45  # ref
     # ours: Gaussian soft-NMS (dodt.learned.layout.soft_nms) with this sigma instead of NMS at
     # nms_iou (0). People walking close together, or one partly hidden behind another, have
@@ -310,15 +345,16 @@ class LearnedConfig:
     # m/s / ID switches / recall 0.5-5 m % / beyond 4 m %): 0 (off) 0.91 / 0.1433 / 132 / 99.0 /
     # 87.2; 0.6 1.02 / 0.1411 / 93 / 99.1 / 86.9; 0.8 0.97 / 0.1414 / 81 / 99.1 / 86.6
     fragment_height: float = 0.6
-    # a track is a person when this many of its last person_window detections were person boxes
-    # (ours; the ref uses the latest box alone). 3 of 3: a track is labelled at its third frame
+    # a track is a person when this fraction of its detections over person_span were person boxes
+    # (ours; the ref uses the latest box alone). All over 2 / 30 s (3 of 3 frames at 30 Hz; 2 frames
+    # at a lower rate): a track is labelled at its third frame
     # (67 ms after its first), not its second; a young track's velocity is its worst and a box
     # lifted once from a far person's noisy depth can lie a metre off him. Perception benchmark
     # frames, seeds 0-2, with the two rules above (FP % / vel. err. m/s / ID switches / recall 0.5-5
     # m % / beyond 4 m %): 2 of 3 1.02 / 0.1411 / 93 / 99.1 / 86.9; 3 of 3 0.83 / 0.1390 / 86 / 98.9 /
     # 86.6. Seeds 3-4 (held out): 0.94 / 0.1363 against 0.93 / 0.1417 before the three rules
-    person_window: int = 3
-    person_min: int = 3
+    person_span: float = 2 / 30  # s
+    person_fraction: float = 1.0
     # ours: a person box whose 3D box crosses the image's left or right edge casts no vote, either
     # way (dodt.geometry.box_cut_by_view_side): lifted from the part of the person in view, it lies
     # off him, and the part's centre slides along the edge as he walks in or out of view, so a
@@ -337,7 +373,7 @@ class LearnedConfig:
     # before) 8.7 / 151 / 92.6; 0.4 s 6.0 / 146 / 89.5; 0.2 s 5.0 / 160 / 87.8; errors within 5 m
     # and recall at 0.5-5 m the same for all three
     far_coast_time: float = 0.4  # s
-    # ours: a coasting person track is dropped after this many missed frames (0: never) when its
+    # ours: a coasting person track is dropped this long after its last detection (0: never) when its
     # image box lies in full view, nothing nearer hides it (less than unseen_occluder_fraction of
     # the box's valid depths lie in front of it) and no 2D person box of the frame overlaps its
     # image box by unseen_iou: the detector looks right at its place and sees no person there.
@@ -347,7 +383,7 @@ class LearnedConfig:
     # vel. err. m/s / recall 0.5-5 m % / beyond 4 m %): off 1.70 / 1277 / 244 / 0.1435 / 99.3 /
     # 87.5; 6 frames, IoU 0.5 (these) 1.26 / 649 / 229 / 0.1423 / 99.1 / 86.5; IoU 0.3 1.57 / 932;
     # IoU 0.7 1.29 / 563 / 242 / 0.1453; 3 frames, IoU 0.5 1.21 / 467 / 205 / 0.1422 / 98.8 / 85.1
-    unseen_after: int = 6
+    unseen_after: float = 6 / 30  # s: 6 missed frames at 30 Hz
     unseen_iou: float = 0.5
     unseen_occluder_fraction: float = 0.3
 
@@ -365,3 +401,74 @@ class DODTConfig:
     track: TrackConfig = field(default_factory=TrackConfig)
     identification: IdentificationConfig = field(default_factory=IdentificationConfig)
     learned: LearnedConfig = field(default_factory=LearnedConfig)
+    # Hz: the frame rate the per-frame constants (KalmanConfig's Q, TrackConfig.size_smoothing) are
+    # given for, the reference code's 30 Hz timers; at another rate they are scaled by dt x this
+    reference_rate: float = 30.0
+
+
+def override(cfg: DODTConfig, assignments) -> DODTConfig:
+    """``cfg`` with ``section.field=value`` assignments applied (``name=value`` for a top-level
+    field), each value read as the field's type: a number, true / false, a comma list for a tuple,
+    none for an optional field. A ValueError names the assignment and what is wrong."""
+    import dataclasses
+    import typing
+
+    for text in assignments:
+        key, sep, raw = str(text).partition("=")
+        key, raw = key.strip(), raw.strip()
+        if not sep or not key:
+            raise ValueError(f"--set {text!r}: expected section.field=value, e.g. kalman.q_pos=0.02")
+        path = key.split(".")
+        if len(path) > 2:
+            raise ValueError(f"--set {key}: expected section.field or a top-level field")
+        owner = cfg if len(path) == 1 else getattr(cfg, path[0], None)
+        if not dataclasses.is_dataclass(owner) or (len(path) == 2 and path[0] not in {f.name for f in dataclasses.fields(cfg)}):
+            sections = ", ".join(f.name for f in dataclasses.fields(cfg) if dataclasses.is_dataclass(getattr(cfg, f.name)))
+            raise ValueError(f"--set {key}: no section {path[0]!r}; sections: {sections}")
+        name = path[-1]
+        hints = typing.get_type_hints(type(owner))
+        if name not in hints or dataclasses.is_dataclass(getattr(owner, name)):
+            raise ValueError(f"--set {key}: {type(owner).__name__} has no field {name!r}")
+        try:
+            value = _parse_value(raw, hints[name])
+        except ValueError as e:
+            raise ValueError(f"--set {key}={raw}: {e}") from None
+        new = dataclasses.replace(owner, **{name: value})
+        cfg = new if len(path) == 1 else dataclasses.replace(cfg, **{path[0]: new})
+    return cfg
+
+
+def _parse_value(raw: str, hint):
+    import typing
+
+    args = typing.get_args(hint)
+    optional = type(None) in args
+    if raw.lower() in ("none", "null") and optional:
+        return None
+    if optional:
+        hint = next(a for a in args if a is not type(None))
+        args = typing.get_args(hint)
+    origin = typing.get_origin(hint)
+    if origin is tuple:
+        parts = [p.strip() for p in raw.split(",") if p.strip()]
+        item = args[0] if args else str
+        if len(args) > 1 and args[-1] is not Ellipsis and len(parts) != len(args):
+            raise ValueError(f"expected {len(args)} comma-separated values")
+        return tuple(_parse_value(p, item) for p in parts)
+    if hint is bool:
+        if raw.lower() in ("true", "1", "yes", "on"):
+            return True
+        if raw.lower() in ("false", "0", "no", "off"):
+            return False
+        raise ValueError("expected true or false")
+    if hint is int:
+        try:
+            return int(raw)
+        except ValueError:
+            raise ValueError("expected a whole number") from None
+    if hint is float:
+        try:
+            return float(raw)
+        except ValueError:
+            raise ValueError("expected a number") from None
+    return raw  # a string

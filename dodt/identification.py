@@ -10,8 +10,9 @@ Per track and frame, a candidate test:
    than a person walks, or the point was near the end of the depth range); too many left out
    and the frame says nothing;
 3. candidate if votes / valid points >= T_ratio.
-A track is dynamic once the last ``consistency`` frames were candidates, and stays dynamic while
-at least ``force_dynamic_count`` of the last ``force_dynamic_window`` frames were dynamic. A
+A track is dynamic once every frame within the last ``consistency_span`` seconds was a candidate,
+and stays dynamic while at least ``force_dynamic_fraction`` of its frames over the last
+``force_dynamic_span`` were dynamic (windows of time: dodt.windows). A
 track flagged a person by a learned detector is dynamic at once, for as long as the flag lasts:
 the flag does not enter the candidates or that history (ours), so it cannot lock a standing
 obstacle dynamic.
@@ -24,6 +25,7 @@ from scipy.spatial import cKDTree
 from dodt.config import IdentificationConfig
 from dodt.frames import CameraIntrinsics
 from dodt.geometry import in_field_of_view
+from dodt.windows import FrameClock
 
 
 def match_reach(dt: float, cfg: IdentificationConfig) -> float:
@@ -80,14 +82,22 @@ def size_ok(size: np.ndarray, cfg: IdentificationConfig) -> bool:
     return bool(np.all(np.abs(np.asarray(size) - np.asarray(cfg.target_size)) <= cfg.target_size_tolerance))
 
 
-def decide(candidates: list[bool], dynamic_history: list[bool], cfg: IdentificationConfig) -> bool:
+def decide(candidates: list[bool], dynamic_history: list[bool], cfg: IdentificationConfig,
+           clock: FrameClock | None = None) -> bool:
     """Consistency over frames, with the reference code's hysteresis, and ours: a dynamic track
-    turns static only after ``release_frames`` frames in a row that were no candidates."""
-    n = cfg.consistency
+    turns static only when no frame over ``release_span`` was a candidate.
+
+    candidates: of the frames with a detection, up to this one; dynamic_history: the labels of
+    the frames before this one. The spans are counted in frames at ``clock``'s frame period
+    (default: the reference rate)."""
+    clock = clock or FrameClock()
+    n = clock.frames_within(cfg.consistency_span)
     if len(candidates) >= n and all(candidates[-n:]):
         return True
-    r = cfg.release_frames
-    if r > 0 and dynamic_history and dynamic_history[-1] and any(candidates[-r:]):
+    if cfg.release_span is not None and dynamic_history and dynamic_history[-1] and \
+            any(candidates[-(clock.intervals(cfg.release_span) + 1):]):
         return True
-    window = dynamic_history[-cfg.force_dynamic_window:]
-    return len(dynamic_history) >= cfg.force_dynamic_window and sum(window) >= cfg.force_dynamic_count
+    if cfg.force_dynamic_span is None:
+        return False
+    w = clock.intervals(cfg.force_dynamic_span) + 1
+    return len(dynamic_history) >= w and sum(dynamic_history[-w:]) >= cfg.force_dynamic_fraction * w - 1e-9

@@ -43,12 +43,14 @@ class KalmanFilter:
         self._F_dt, self._F = dt, F
         return F
 
-    def Q_for(self, dt: float) -> np.ndarray:
-        """Process noise: the reference code's constant diagonal Q, or, with
-        ``measurement = "position"``, the discretised white-jerk (CA) or white-acceleration (CV)
-        model with spectral density q (Bar-Shalom, Li, Kirubarajan 2001, Sec. 6.2-6.3)."""
+    def Q_for(self, dt: float, q_scale: float = 1.0) -> np.ndarray:
+        """Process noise: the reference code's constant diagonal Q, given per frame of its 30 Hz
+        filter, times ``q_scale`` (dt in such frames: the variance a random walk adds grows with
+        time), or, with ``measurement = "position"``, the discretised white-jerk (CA) or
+        white-acceleration (CV) model with spectral density q (Bar-Shalom, Li, Kirubarajan 2001,
+        Sec. 6.2-6.3)."""
         if self.cfg.measurement != "position":
-            return self.Q
+            return self.Q if q_scale == 1.0 else self.Q * q_scale
         q = self.cfg.q_white
         if self.ca:
             blk = q * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2],
@@ -62,10 +64,11 @@ class KalmanFilter:
             Q[np.ix_(idx, idx)] = blk
         return Q
 
-    def predict(self, dt: float) -> None:
+    def predict(self, dt: float, q_scale: float = 1.0) -> None:
+        """x = F x, P = F P F^T + Q; ``q_scale`` scales the per-frame Q (Q_for)."""
         F = self.F(dt)
         self.x = F @ self.x
-        self.P = F @ self.P @ F.T + self.Q_for(dt)
+        self.P = F @ self.P @ F.T + self.Q_for(dt, q_scale)
 
     def update(self, z: np.ndarray, window: float = 1.0) -> None:
         """Update with z = [x, y, vx, vy, (ax, ay)], or only [x, y] when measuring position.

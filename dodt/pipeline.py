@@ -5,10 +5,15 @@
     for ob in result.dynamic: ...
 
 Detectors -> ensemble -> association -> Kalman filter -> identification, each timed. Input
-is checked: a wrong shape or dtype, or intrinsics that do not match the image, raise a
-ValueError naming the problem; bad data is skipped and counted instead (NaN / inf / negative
-depth pixels are invalid pixels; a frame with a non-finite pose or a timestamp that does not
-move forward is skipped; a gap longer than the coasting time restarts the tracks).
+is checked: a wrong shape or dtype, intrinsics that do not match the image, a depth scale that is
+not a positive number or a pose whose rotation is a reflection raise a ValueError naming the
+problem; bad data is skipped and counted instead (NaN / inf / negative depth pixels are invalid
+pixels; a frame with a non-finite pose or a timestamp that does not move forward is skipped; so
+is a stamp that jumps ahead by more than ``depth.max_time_jump``, until
+``depth.confirm_jump_frames`` frames in a row confirm the new time, which then restarts the
+tracks; a gap longer than the coasting time restarts the tracks).
+Every history window is a span of time (dodt.config), so any frame rate works with one
+configuration.
 The learned person detector (YOLO-MAD, dodt.learned) runs when ``cfg.learned.enabled``; any
 callable (frame, depth_m, ensemble_detections) -> detections can stand in for it through
 ``learned_detector``. Its time is the "learned" module's.
@@ -52,6 +57,10 @@ def validate_frame(frame: SensorFrame) -> None:
         raise ValueError(f"intrinsics fx, fy must be finite and positive, got {K.fx}, {K.fy}")
     if not (math.isfinite(K.cx) and math.isfinite(K.cy)):
         raise ValueError(f"intrinsics cx, cy must be finite, got {K.cx}, {K.cy}")
+    scale = frame.depth_scale
+    if not (isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0):
+        raise ValueError(f"depth_scale (metres per unit of a uint16 depth image) must be a finite number above 0, "
+                         f"got {scale!r}")
     if frame.color is not None:
         c = frame.color
         if not isinstance(c, np.ndarray) or c.shape != (K.height, K.width, 3) or c.dtype != np.uint8:
@@ -65,6 +74,9 @@ def validate_frame(frame: SensorFrame) -> None:
             raise ValueError(f"T_world_camera's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
         if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-3):
             raise ValueError("T_world_camera's rotation is not orthonormal")
+        if np.linalg.det(T[:3, :3]) < 0:
+            raise ValueError("T_world_camera's rotation has determinant -1: a reflection, not a rotation "
+                             "(a left-handed camera or world frame?)")
 
 
 def mark_cut(dets: list[Detection], K, T_world_camera: np.ndarray) -> None:
@@ -88,7 +100,8 @@ class DODT:
         self.last_stamp: float | None = None
         self.poses: dict[int, np.ndarray] = {}
         self.clouds: dict[int, np.ndarray] = {}  # seq -> that frame's filtered cloud
-        self._pose_order: deque[int] = deque()
+        self._pose_order: deque[int] = deque()  # the frames kept for voting
+        self._jump: list[float] = []  # stamps of the frames in a row that jumped away from last_stamp
         self.counters = {"frames": 0, "skipped_bad_pose": 0, "skipped_time": 0, "restarted_after_gap": 0,
                          "bad_pixels": 0, "frames_with_bad_pixels": 0}
         self._seq = 0
@@ -99,6 +112,29 @@ class DODT:
         self.poses.clear()
         self.clouds.clear()
         self._pose_order.clear()
+        self._jump = []
+
+    def _stamp_ok(self, stamp: float) -> bool:
+        """Whether a frame's stamp may be processed: it moves forward from the last processed
+        frame by at most depth.max_time_jump. A frame that jumps (forward farther, or back) is
+        refused; when depth.confirm_jump_frames such frames come in a row, each moving forward
+        from the one before by a plausible step, the new time is taken (the tracks restart)."""
+        if not math.isfinite(stamp):
+            return False
+        last = self.last_stamp
+        if last is None or last < stamp <= last + self.cfg.depth.max_time_jump:
+            self._jump = []
+            return True
+        dc = self.cfg.depth
+        if self._jump and not self._jump[-1] < stamp <= self._jump[-1] + dc.max_time_jump:
+            self._jump = []
+        self._jump.append(stamp)
+        if len(self._jump) < max(dc.confirm_jump_frames, 1):
+            return False
+        # the clock did jump: start again from this frame
+        self.reset()
+        self.counters["restarted_after_gap"] += 1
+        return True
 
     # ------------------------------------------------------------------ helpers
 
@@ -154,19 +190,22 @@ class DODT:
             self.counters["frames_with_bad_pixels"] += 1
         if not np.all(np.isfinite(T)):
             return self._skip(frame, "skipped_bad_pose", n_bad)
-        if not math.isfinite(stamp) or (self.last_stamp is not None and stamp <= self.last_stamp):
+        if not self._stamp_ok(stamp):
             return self._skip(frame, "skipped_time", n_bad)
         dt = 0.0 if self.last_stamp is None else stamp - self.last_stamp
         if dt > max(self.cfg.depth.max_frame_gap, self.cfg.track.coast_time):
             self.tracker.reset()  # frames were lost for longer than tracks survive: start again
             self.counters["restarted_after_gap"] += 1
             dt = 0.0
+        if dt > 0:
+            self.tracker.clock.observe(dt)
         self.last_stamp = stamp
         seq = self._seq
         self._seq += 1
         self.poses[seq] = T
         self._pose_order.append(seq)
-        while len(self._pose_order) > self.cfg.identification.frame_skip + 1:
+        # the frames a track may vote against: vote_span back (Track.identify)
+        while len(self._pose_order) > self.tracker.clock.intervals(self.cfg.identification.vote_span) + 1:
             old = self._pose_order.popleft()
             self.poses.pop(old, None)
             self.clouds.pop(old, None)

@@ -27,7 +27,7 @@ from dodt.config import (AssociationConfig, DODTConfig, EnsembleConfig, Identifi
                          LearnedConfig, TrackConfig)
 
 _CENTER_CV = dict(association=AssociationConfig(method="center"), kalman=KalmanConfig(model="cv"))
-_VELOCITY_ONLY = IdentificationConfig(method="velocity", consistency=1, force_dynamic_window=1000)
+_VELOCITY_ONLY = IdentificationConfig(method="velocity", consistency_span=0.0, force_dynamic_span=None)
 _NO_COAST = TrackConfig(coast_time=0.0)
 
 PRESETS: dict[str, DODTConfig] = {
@@ -42,7 +42,7 @@ PRESETS: dict[str, DODTConfig] = {
                                    identification=_VELOCITY_ONLY, track=_NO_COAST, **_CENTER_CV),
     "method-3-udepth-velocity": DODTConfig(
         name="method-3-udepth-velocity", ensemble=EnsembleConfig(detectors=("udepth",)),
-        identification=replace(_VELOCITY_ONLY, consistency=3), track=_NO_COAST, **_CENTER_CV),
+        identification=replace(_VELOCITY_ONLY, consistency_span=2 / 30), track=_NO_COAST, **_CENTER_CV),
 }
 
 

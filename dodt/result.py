@@ -11,20 +11,27 @@ class TrackedObstacle:
     id: int
     center: np.ndarray  # (3,) world [m]; x, y filtered, z from the latest detection
     size: np.ndarray  # (3,) [m]
-    velocity: np.ndarray  # (3,) [m/s], z = 0
-    acceleration: np.ndarray  # (3,) [m/s^2], z = 0
+    # (3,) [m/s], z = 0; zero for a track identified static: a static obstacle says it is still
+    velocity: np.ndarray
+    acceleration: np.ndarray  # (3,) [m/s^2], z = 0; zero for a static track
     dynamic: bool
     coasting: bool  # no detection this frame: the state is the Kalman prediction
     age: float  # s since the track was born
     history: np.ndarray  # (K, 4) recent [t, x, y, z] centres, oldest first
     is_person: bool = False
     position_std: float = 0.0  # m, predicted horizontal position uncertainty
+    # (3,) [m/s] and [m/s^2], z = 0: the tracking filter's velocity and acceleration whatever the
+    # label, for a consumer that second-guesses the static label (a static obstacle whose box grows
+    # or shifts as more of it comes into view has some); None: as ``velocity``, ``acceleration``
+    filter_velocity: np.ndarray | None = None
+    filter_acceleration: np.ndarray | None = None
 
     def to_json(self) -> dict:
         r = lambda a: [round(float(x), 4) for x in a]  # noqa: E731
         return {"id": self.id, "center": r(self.center), "size": r(self.size), "velocity": r(self.velocity),
                 "acceleration": r(self.acceleration), "dynamic": self.dynamic, "coasting": self.coasting,
-                "age": round(self.age, 3), "is_person": self.is_person}
+                "age": round(self.age, 3), "is_person": self.is_person,
+                "filter_velocity": r(self.velocity if self.filter_velocity is None else self.filter_velocity)}
 
 
 @dataclass(frozen=True, eq=False)

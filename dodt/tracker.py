@@ -2,10 +2,12 @@
 
 Each frame: every track is predicted to the frame's time; tracks and detections are associated
 (dodt.association); a matched track is updated with its detection (position measured, velocity
-and acceleration as pseudo-measurements over up to ``averaging_frames`` frames of detection
+and acceleration as pseudo-measurements over up to ``averaging_time`` seconds of detection
 history, paper eq. for V_t and A_t); an unmatched track coasts on its prediction for up to
 ``coast_time`` seconds (the paper drops it at once) and keeps its id if its obstacle comes
 back; unmatched detections start tracks. Then each track is identified static or dynamic.
+
+Every window is a span of time (dodt.config's module docstring, dodt.windows).
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from dodt.identification import decide, is_candidate, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
 from dodt.learned.layout import iou_one
 from dodt.result import TrackedObstacle
+from dodt.windows import FrameClock, blend, keep_last
 
 
 @dataclass
@@ -45,9 +48,11 @@ def _anchor(det: Detection, source: str) -> np.ndarray:
 
 
 class Track:
-    def __init__(self, tid: int, det: Detection, seq: int, stamp: float, cfg: DODTConfig):
+    def __init__(self, tid: int, det: Detection, seq: int, stamp: float, cfg: DODTConfig,
+                 clock: FrameClock | None = None):
         self.id = tid
         self.cfg = cfg
+        self.clock = clock or FrameClock(cfg.reference_rate)
         anchor = _anchor(det, cfg.kalman.position_source)
         self.offset = det.center[:2] - anchor  # box centre relative to the measured point
         self.kf = KalmanFilter(cfg.kalman, anchor)
@@ -57,20 +62,22 @@ class Track:
         self.size = det.size.copy()  # smoothed, for the output
         self.det_size = det.size.copy()  # the latest detection's, for association
         self.count, self.spread = features(det)
-        self.observations: deque[_Observation] = deque(maxlen=cfg.kalman.averaging_frames + 1)
+        # The histories hold what their windows (spans of time, as frames at the current frame
+        # period: dodt.windows) need.
+        self.observations: deque[_Observation] = deque()  # for the pseudo-measurements
         self.observations.append(_Observation(seq, stamp, anchor.copy(), None, det.source == "learned"))
-        self.clouds: deque[tuple[int, float, np.ndarray]] = deque(maxlen=cfg.identification.frame_skip + 1)
+        self.clouds: deque[tuple[int, float, np.ndarray]] = deque()  # (seq, stamp, points) to vote with
         self.clouds.append((seq, stamp, det.points))
-        self.history: deque[tuple[float, float, float, float]] = deque(maxlen=cfg.track.history)
+        self.history: deque[tuple[float, float, float, float]] = deque()  # over track.output_history
         self.history.append((stamp, float(det.center[0]), float(det.center[1]), self.z))
-        self.candidates: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
-        self.dynamic_history: deque[bool] = deque(maxlen=cfg.identification.force_dynamic_window)
+        self.candidates: deque[bool] = deque()  # of the frames with a detection
+        self.dynamic_history: deque[bool] = deque()  # the geometric label of every frame
         self.geometric_dynamic = False  # the label from speed and point voting alone
         # A person box from the learned detector makes the track a person (dynamic at once) only
-        # when it recurs: person_min of the last person_window matched detections (ours; a
+        # when it recurs: person_fraction of its matched detections over person_span (ours; a
         # single false box would otherwise label a static obstacle dynamic for good).
         # A person box cut by the view's side casts no vote (learned.cut_boxes_vote).
-        self.person_votes: deque[bool] = deque(maxlen=cfg.learned.person_window)
+        self.person_votes: deque[bool] = deque()
         self._vote_person(det)
         self.coasting = False
         self.missed = 0  # consecutive frames without a detection
@@ -78,7 +85,10 @@ class Track:
 
     @property
     def is_person(self) -> bool:
-        return sum(self.person_votes) >= self.cfg.learned.person_min
+        """person_fraction of the votes over learned.person_span (3 at 30 Hz) were person boxes."""
+        n = self.clock.intervals(self.cfg.learned.person_span) + 1
+        return len(self.person_votes) >= n and \
+            sum(list(self.person_votes)[-n:]) >= self.cfg.learned.person_fraction * n - 1e-9
 
     @property
     def dynamic(self) -> bool:
@@ -140,11 +150,14 @@ class Track:
         (learned.cut_boxes_vote)."""
         if self.cfg.learned.cut_boxes_vote or not det.cut:
             self.person_votes.append(det.is_person)
+            keep_last(self.person_votes, self.clock.intervals(self.cfg.learned.person_span) + 1)
 
     def update(self, det: Detection, seq: int, stamp: float) -> None:
         k = self.cfg.kalman
+        n_avg = max(1, self.clock.intervals(k.averaging_time))  # 10 observations back at 30 Hz
+        keep_last(self.observations, n_avg)
         obs = list(self.observations)
-        first = max(0, len(obs) - k.averaging_frames)  # up to averaging_frames back
+        first = max(0, len(obs) - n_avg)  # up to averaging_time back
         # The difference is taken to an observation of the same kind where the window holds one: a
         # learned box's anchor (depths lifted from the box) sits apart from the same person's cluster
         # of points, and a track switching between them would read that offset as motion
@@ -154,7 +167,9 @@ class Track:
         prev = obs[first]
         dt = stamp - prev.stamp
         anchor = _anchor(det, k.position_source)
-        self.offset = 0.7 * self.offset + 0.3 * (det.center[:2] - anchor)
+        per_frame = self.clock.steps(self.clock.period)  # reference frames per frame
+        w_off = blend(0.3, per_frame)
+        self.offset = (1 - w_off) * self.offset + w_off * (det.center[:2] - anchor)
         if dt > 1e-6:
             v = (anchor - prev.center[:2]) / dt
             v = self._turn_compensated(v, stamp, dt)
@@ -163,17 +178,20 @@ class Track:
         # Acceleration needs a velocity measured back then; until there is one, measure none
         # (the filter's own estimate, so the update adds no innovation there).
         a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
-        window = (len(obs) - first) / k.averaging_frames  # frames spanned / full window
+        window = (len(obs) - first) / n_avg  # observations spanned / full window
         self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window)
         self.observations.append(_Observation(seq, stamp, anchor.copy(), v, lifted))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
         # which then cannot follow a person whose box changes as they turn or swing their arms).
-        w_new = self.cfg.track.size_smoothing
+        w_new = blend(self.cfg.track.size_smoothing, per_frame)
         self.size = (1 - w_new) * self.size + w_new * det.size
         self.det_size = det.size.copy()
         self.count, self.spread = features(det)
         self.clouds.append((seq, stamp, det.points))
+        n_vote = self.clock.intervals(self.cfg.identification.vote_span)
+        while self.clouds[0][0] < seq - n_vote:
+            self.clouds.popleft()
         self.last_seen = stamp
         self.missed = 0
         self._vote_person(det)
@@ -183,12 +201,13 @@ class Track:
         """clouds(seq) -> that frame's whole filtered cloud, or None."""
         cfg = self.cfg.identification
         if self.coasting:
-            self.dynamic_history.append(self.geometric_dynamic)
+            self._label(self.geometric_dynamic)
             return  # no new points: the label stays
         speed = float(np.linalg.norm(self.kf.velocity))
         cur_seq, cur_t, cur_pts = self.clouds[-1]
-        # the cloud from k frames back, or the oldest one kept since then
-        old = [c for c in self.clouds if cur_seq - cfg.frame_skip <= c[0] < cur_seq]
+        # the cloud from k frames back (vote_span), or the oldest one kept since then
+        k_back = self.clock.intervals(cfg.vote_span)
+        old = [c for c in self.clouds if cur_seq - k_back <= c[0] < cur_seq]
         votes, valid, skipped = 0, 0, len(cur_pts)
         # voting only for what moves fast enough to be a candidate at all, and is not wider
         # than any walking person or pair of people (saves the work; neither can be a candidate)
@@ -211,13 +230,20 @@ class Track:
                 votes, valid, skipped = vote(voters, near, dt, v_box, T_then, K, max_depth, cfg)
         cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
         self.candidates.append(cand)
+        keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
+                                       self.clock.intervals(cfg.release_span) + 1))
         # The geometric label (candidates, consistency, the hysteresis and the force-dynamic lock)
         # sees only the geometric evidence; the person label adds to it and does not feed it. Fed
         # into it, ten person frames locked a static obstacle dynamic for good (force_dynamic):
         # on circles a 3 m tall obstacle 5 m away, mutual best match of a passing person's box
         # for a while, stayed dynamic for 8 s after its last person box.
-        self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg)
-        self.dynamic_history.append(self.geometric_dynamic)
+        self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg, self.clock)
+        self._label(self.geometric_dynamic)
+
+    def _label(self, dynamic: bool) -> None:
+        self.dynamic_history.append(dynamic)
+        span = self.cfg.identification.force_dynamic_span
+        keep_last(self.dynamic_history, 1 if span is None else self.clock.intervals(span) + 1)
 
     def camera_point(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """The predicted centre in the camera frame of pose (R, t)."""
@@ -231,14 +257,19 @@ class Track:
         return K.fx * pc[0] / pc[2] + K.cx, K.fy * pc[1] / pc[2] + K.cy, half_w, half_h
 
     def output(self, stamp: float) -> TrackedObstacle:
+        """The track as reported. A track identified static reports zero velocity and acceleration:
+        its filter's velocity is then mostly the drift of a box whose visible part changes as the
+        camera moves, not motion; ``filter_velocity`` and ``filter_acceleration`` keep them."""
         h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
+        dynamic = self.dynamic
+        v = np.array([self.kf.velocity[0], self.kf.velocity[1], 0.0])
+        a = np.array([self.kf.acceleration[0], self.kf.acceleration[1], 0.0])
         return TrackedObstacle(
             id=self.id, center=self.center, size=self.size.copy(),
-            velocity=np.array([self.kf.velocity[0], self.kf.velocity[1], 0.0]),
-            acceleration=np.array([self.kf.acceleration[0], self.kf.acceleration[1], 0.0]),
-            dynamic=self.dynamic, coasting=self.coasting, age=stamp - self.born,
+            velocity=v if dynamic else np.zeros(3), acceleration=a if dynamic else np.zeros(3),
+            dynamic=dynamic, coasting=self.coasting, age=stamp - self.born,
             history=np.array(h, float).reshape(-1, 4), is_person=self.is_person,
-            position_std=float(np.sqrt(self.kf.position_variance)))
+            position_std=float(np.sqrt(self.kf.position_variance)), filter_velocity=v, filter_acceleration=a)
 
 
 class Tracker:
@@ -246,15 +277,17 @@ class Tracker:
         self.cfg = cfg
         self.tracks: list[Track] = []
         self._next_id = 1
+        self.clock = FrameClock(cfg.reference_rate)
 
     def reset(self) -> None:
         self.tracks = []
 
     def predict(self, dt: float) -> None:
+        q_scale = self.clock.steps(dt)  # the reference code's Q is per 30 Hz frame
         for t in self.tracks:
             if t.coasting and t.kf.ca:
                 t.kf.x[4:6] = 0.0  # unobserved acceleration would run away: coast at constant velocity
-            t.kf.predict(dt)
+            t.kf.predict(dt, q_scale)
 
     def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> int:
         """Delete coasting tracks whose predicted place is in view and seen through: the camera
@@ -271,7 +304,7 @@ class Tracker:
         H, W = depth_m.shape
         person_reach = max(self.cfg.learned.depth_max, dc.depth_max) if self.cfg.learned.enabled else dc.depth_max
         for tr in self.tracks:
-            if tr.coasting and tr.missed >= tc.seen_through_after:
+            if tr.coasting and tr.missed >= self.clock.intervals(tc.seen_through_after):
                 pc = tr.camera_point(R, t)
                 reach = person_reach if tr.is_person else dc.depth_max
                 if dc.depth_min <= pc[2] <= reach:
@@ -293,12 +326,12 @@ class Tracker:
 
     def drop_unseen_people(self, boxes_2d: np.ndarray, depth_m: np.ndarray, K: CameraIntrinsics,
                            T_world_camera: np.ndarray) -> int:
-        """Delete coasting person tracks that the learned detector should see and does not: after
-        ``learned.unseen_after`` missed frames, the track's image box lies wholly in the view,
-        less than ``learned.unseen_occluder_fraction`` of the valid depths in it lie in front of
-        the track (nearer than its centre by half its width and 0.3 m: nothing hides it), and no
-        2D person box of this frame (``boxes_2d``, pixels) overlaps it by ``learned.unseen_iou``.
-        Returns how many."""
+        """Delete coasting person tracks that the learned detector should see and does not: from
+        ``learned.unseen_after`` seconds after its last detection, the track's image box lies
+        wholly in the view, less than ``learned.unseen_occluder_fraction`` of the valid depths in
+        it lie in front of the track (nearer than its centre by half its width and 0.3 m: nothing
+        hides it), and no 2D person box of this frame (``boxes_2d``, pixels) overlaps it by
+        ``learned.unseen_iou``. Returns how many."""
         lc, dc = self.cfg.learned, self.cfg.depth
         if lc.unseen_after <= 0:
             return 0
@@ -307,7 +340,7 @@ class Tracker:
         boxes = np.asarray(boxes_2d, dtype=np.float64).reshape(-1, 4)
         keep, dropped = [], 0
         for tr in self.tracks:
-            if tr.coasting and tr.is_person and tr.missed >= lc.unseen_after:
+            if tr.coasting and tr.is_person and tr.missed >= self.clock.intervals(lc.unseen_after):
                 pc = tr.camera_point(R, t)
                 if dc.depth_min <= pc[2] <= lc.depth_max:
                     u, v, half_w, half_h = tr.image_box(pc, K)
@@ -376,9 +409,11 @@ class Tracker:
             survivors.append(tr)
             c = tr.center_xy
             tr.history.append((stamp, float(c[0]), float(c[1]), tr.z))
+            while tr.history[0][0] < stamp - self.cfg.track.output_history:
+                tr.history.popleft()
         for di, det in enumerate(dets):
             if di not in matched_d:
-                survivors.append(Track(self._next_id, det, seq, stamp, self.cfg))
+                survivors.append(Track(self._next_id, det, seq, stamp, self.cfg, self.clock))
                 self._next_id += 1
         self.tracks = survivors
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import time
 from pathlib import Path
 
@@ -45,26 +46,45 @@ PAPER_TABLE_II = {"udepth": 3.4, "dbscan": 1.3, "learned": 14.3, "association": 
 PAPER_TOTAL_MS = 19.12  # with YOLO-MAD; without it 19.12 - 14.3
 
 
+def result_key(config: str, rate: float | None) -> str:
+    """The name a configuration's results go under: the configuration's, or with ``rate`` (frames
+    processed per second, the camera's decimated) ``config@RATEHz``."""
+    return config if rate is None else f"{config}@{rate:g}Hz"
+
+
 def run_scenario(name: str, seed: int, configs: list[str], duration: float | None = None,
-                 record_tracks: bool = False):
-    """Simulate one scenario once and score every configuration on its frames."""
+                 record_tracks: bool = False, rates: list[float] | None = None):
+    """Simulate one scenario once and score every configuration on its frames.
+
+    ``rates`` (Hz): each configuration also runs on the frames decimated to each rate (a frame is
+    kept when its stamp reaches the next multiple of 1 / rate after the first), and is scored on
+    those frames only; the results are keyed by ``result_key``. None: every frame, keyed by the
+    configuration's name."""
     sc = load_scenario(name)
     world = World(sc, seed=seed, segmentation=True)
     ref = scenario_reference(sc)
-    pipes = {c: DODT(preset(c)) for c in configs}
-    metrics = {c: PerceptionMetrics() for c in configs}
-    tracks = {c: [] for c in configs}
+    runs = [(c, r) for c in configs for r in (rates or [None])]
+    pipes = {result_key(c, r): DODT(preset(c)) for c, r in runs}
+    metrics = {k: PerceptionMetrics() for k in pipes}
+    tracks = {k: [] for k in pipes}
+    slots: dict = {}  # per decimated run: (the first frame's stamp, the index of the next 1 / rate slot)
     truth_log = []
     frame = world.latest_frame()
     n = int(round((duration or sc.duration) * sc.rates.control))
     for k in range(n + 1):
         if frame is not None:
             truth = world.ground_truth()
-            for c in configs:
-                r = pipes[c].process(frame)
-                metrics[c].add(r, truth, frame.intrinsics)
+            for c, rate in runs:
+                key = result_key(c, rate)
+                if rate is not None:
+                    t0, slot = slots.get(key, (frame.stamp, 0))
+                    if frame.stamp < t0 + slot / rate - 1e-6:
+                        continue
+                    slots[key] = (t0, int(math.floor((frame.stamp - t0) * rate + 1e-6)) + 1)
+                r = pipes[key].process(frame)
+                metrics[key].add(r, truth, frame.intrinsics)
                 if record_tracks:
-                    tracks[c].append([(o.id, float(o.center[0]), float(o.center[1]), o.dynamic) for o in r.obstacles])
+                    tracks[key].append([(o.id, float(o.center[0]), float(o.center[1]), o.dynamic) for o in r.obstacles])
             if record_tracks:
                 truth_log.append([(o.id, float(o.center[0]), float(o.center[1])) for o in truth.obstacles
                                   if o.kind == "person"])
@@ -84,35 +104,37 @@ def write_tables(out: Path, overall: dict, per_scn: dict, per_seed: dict | None 
     overall figures of each seed, so that the spread between draws is in the table too."""
     rows = []
     for cfg, s in overall.items():
-        paper = PAPER_TABLE_I.get(cfg, (None, None, None, None))
+        paper = PAPER_TABLE_I.get(cfg.split("@")[0], (None, None, None, None))
         rows.append({"configuration": cfg, "paper_row": paper[0] or "",
                      "pos_err_m": s["pos_err"], "vel_err_mps": s["vel_err"], "fp_rate_pct": 100 * s["fp_rate"],
                      "recall_pct": 100 * s["recall"], "id_switches": s["id_switches"], "pos_err_3d_m": s["pos_err_3d"],
                      "paper_pos_err_m": paper[1], "paper_vel_err_mps": paper[2], "paper_fp_rate_pct": paper[3],
                      "matched": s["matched"], "dynamic_reports": s["dynamic_reports"],
-                     "duplicate_pct": 100 * s["duplicates"] / max(s["dynamic_reports"], 1)})
+                     "duplicate_pct": 100 * s["duplicates"] / max(s["dynamic_reports"], 1),
+                     "static_speed_p95_mps": s["static_speed_p95"], "still_speed_p95_mps": s["still_speed_p95"]})
     with open(out / "table.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         for r in rows:
             w.writerow({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()})
     lines = ["| Method | Pos. Err. (m) | Vel. Err. (m/s) | FP Rate (%) | Recall 0.5-5 m (%) | ID switches | "
-             "Duplicates (%) | paper Pos. Err. | paper Vel. Err. | paper FP (%) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "Duplicates (%) | Static speed p95 (m/s) | paper Pos. Err. | paper Vel. Err. | paper FP (%) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         name = r["configuration"] + (f" ({r['paper_row']})" if r["paper_row"] else "")
         lines.append(f"| {name} | {_fmt(r['pos_err_m'])} | {_fmt(r['vel_err_mps'])} | {_fmt(r['fp_rate_pct'], 1)} | "
                      f"{_fmt(r['recall_pct'], 1)} | {r['id_switches']} | {_fmt(r['duplicate_pct'], 1)} | "
+                     f"{_fmt(r['static_speed_p95_mps'], 2)} | "
                      f"{_fmt(r['paper_pos_err_m'], 2)} | "
                      f"{_fmt(r['paper_vel_err_mps'], 2)} | {_fmt(r['paper_fp_rate_pct'], 1)} |")
-    lines += ["", "Per scenario (pos. err. m / vel. err. m/s / FP % / recall % / id switches):", "",
+    lines += ["", "Per scenario (pos. err. m / vel. err. m/s / FP % / recall % / id switches / static speed p95 m/s):", "",
               "| Method | " + " | ".join(per_scn) + " |", "|---|" + "---|" * len(per_scn)]
     for cfg in overall:
         cells = []
         for scn in per_scn:
             s = per_scn[scn][cfg]
             cells.append(f"{_fmt(s['pos_err'], 2)} / {_fmt(s['vel_err'], 2)} / {_fmt(100 * s['fp_rate'], 1)} / "
-                         f"{_fmt(100 * s['recall'], 0)} / {s['id_switches']}")
+                         f"{_fmt(100 * s['recall'], 0)} / {s['id_switches']} / {_fmt(s['static_speed_p95'], 2)}")
         lines.append(f"| {cfg} | " + " | ".join(cells) + " |")
     if per_seed and len(per_seed) > 1:
         lines += ["", "Per seed, all scenarios (pos. err. m / vel. err. m/s / FP % / recall %):", "",
@@ -180,9 +202,10 @@ def plot(out: Path, scenario: str, metrics: dict, tracks: dict, truth_log: list)
     for pid in {p[0] for frame in truth_log for p in frame}:
         xy = np.array([(x, y) for frame in truth_log for i, x, y in frame if i == pid])
         ax.plot(xy[:, 0], xy[:, 1], "k-", lw=3, alpha=0.3)
-    if "dodt" in tracks:
+    main = next((k for k in tracks if k.split("@")[0] == "dodt"), None)  # dodt, or dodt at its first rate
+    if main is not None:
         by_id: dict = {}
-        for frame in tracks["dodt"]:
+        for frame in tracks[main]:
             for tid, x, y, dyn in frame:
                 if dyn:
                     by_id.setdefault(tid, []).append((x, y))
@@ -198,22 +221,28 @@ def plot(out: Path, scenario: str, metrics: dict, tracks: dict, truth_log: list)
     fig.savefig(out / f"topdown_{scenario}.png", dpi=110)
 
 
-def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration: float | None = None) -> dict:
+def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration: float | None = None,
+        rates: list[float] | None = None) -> dict:
+    """``rates`` (Hz): score every configuration at each of these frame rates (run_scenario), its
+    rows named ``config@RATEHz``; None: at the camera's rate, rows named by configuration."""
     configs = list(configs or PRESETS)
+    keys = [result_key(c, r) for c in configs for r in (rates or [None])]
     out.mkdir(parents=True, exist_ok=True)
-    per_scn_metrics: dict = {s: {c: [] for c in configs} for s in scenarios}
+    per_scn_metrics: dict = {s: {k: [] for k in keys} for s in scenarios}
     t0 = time.perf_counter()
     for scn in scenarios:
         for i, seed in enumerate(seeds):
-            m, tracks, truth = run_scenario(scn, seed, configs, duration, record_tracks=(i == 0))
-            for c in configs:
-                per_scn_metrics[scn][c].append(m[c])
+            m, tracks, truth = run_scenario(scn, seed, configs, duration, record_tracks=(i == 0), rates=rates)
+            for k in keys:
+                per_scn_metrics[scn][k].append(m[k])
             if i == 0:
                 plot(out, scn, m, tracks, truth)
-            print(f"  {scn} seed {seed}: dodt {m['dodt'].summary() if 'dodt' in m else ''}"[:160], flush=True)
+            s = m[keys[0]].summary()
+            print(f"  {scn} seed {seed}: {keys[0]} recall {s['recall']:.3f} FP {s['fp_rate']:.4f} vel {s['vel_err']:.3f} "
+                  f"static speed p95 {s['static_speed_p95']:.3f}", flush=True)
     per_scn = {s: {c: PerceptionMetrics.combine(v) for c, v in d.items()} for s, d in per_scn_metrics.items()}
-    overall = {c: PerceptionMetrics.combine([m for s in scenarios for m in per_scn_metrics[s][c]]) for c in configs}
-    per_seed = {seed: {c: PerceptionMetrics.combine([per_scn_metrics[s][c][i] for s in scenarios]) for c in configs}
+    overall = {k: PerceptionMetrics.combine([m for s in scenarios for m in per_scn_metrics[s][k]]) for k in keys}
+    per_seed = {seed: {k: PerceptionMetrics.combine([per_scn_metrics[s][k][i] for s in scenarios]) for k in keys}
                 for i, seed in enumerate(seeds)}
     text = write_tables(out, overall, per_scn, per_seed) + "\n" + write_recall_by_distance(out, overall)
     (out / "results.json").write_text(json.dumps({"seeds": seeds, "scenarios": list(scenarios), "overall": overall,

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from dodt.config import LearnedConfig
 from dodt.learned.model import ModelError
+from experiments.sequences import SequenceError
 from sim.scenario import ScenarioError, load_scenario, shipped_scenarios
 
 
@@ -107,7 +108,7 @@ def _cmd_simulate(args) -> int:
     load_scenario(args.scenario)  # refused before the output folder is made
     _output_folder(args.out)
     s = simulate(args.scenario, args.seed, Path(args.out), duration=args.duration, save_every=args.save_every,
-                 renderer=args.renderer, segmentation=not args.no_segmentation)
+                 renderer=args.renderer, segmentation=not args.no_segmentation, fmt=args.format)
     print(f"{s['scenario']} seed {s['seed']}: {s['sim_time']:.2f} s simulated in {s['wall_time_s']:.1f} s "
           f"({s['renderer']} renderer), {s['frames_saved']} frames written to {args.out}")
     print(f"collisions: {s['collision_count']}, min clearance [m]: " +
@@ -138,7 +139,8 @@ def _cmd_bench(args) -> int:
             raise UserError(f"--configs: unknown configuration {unknown[0]!r}; known: {', '.join(PRESETS)}")
         _output_folder(args.out)
         duration = args.duration if args.duration else (6.0 if args.quick else None)
-        bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration)
+        rates = _parse_rates(args.rates) if args.rates else None
+        bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration, rates=rates)
         return 0
     if args.what == "planner":
         from planner.mpc import bench_mpc
@@ -170,6 +172,18 @@ def _cmd_bench(args) -> int:
     bench_perception.run_runtime(args.config, args.scenario or "corridor", seconds=args.seconds if args.seconds else 6.0,
                                  json_out=args.json)
     return 0
+
+
+def _parse_rates(text: str) -> list[float]:
+    """--rates: a comma list of frame rates in Hz, each above 0 and at most the camera's 30 Hz."""
+    try:
+        rates = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise UserError(f"--rates: expected a comma list of frame rates in Hz, got {text!r}") from None
+    bad = [r for r in rates if not 0 < r <= 30]
+    if not rates or bad:
+        raise UserError(f"--rates: each rate must be above 0 and at most the camera's 30 Hz, got {text!r}")
+    return rates
 
 
 def _check_perception(mode: str) -> None:
@@ -501,6 +515,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--save-every", type=_whole(1), default=1, help="write every k-th camera frame")
     s.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
     s.add_argument("--no-segmentation", action="store_true", help="skip the segmentation images (faster)")
+    s.add_argument("--format", choices=("dodt", "tum"), default="dodt",
+                   help="dodt (default: depth/, color/, sensor.json) or tum (a TUM RGB-D sequence: rgb/, depth/, "
+                        "rgb.txt, depth.txt, groundtruth.txt, intrinsics.json), with the ground truth beside")
     s.set_defaults(func=_cmd_simulate)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
@@ -515,6 +532,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--configs", default=None, help="perception: comma-separated configurations")
     b.add_argument("--duration", type=_seconds, default=None, help="perception: seconds per scenario")
     b.add_argument("--quick", action="store_true", help="perception: 6 s per scenario")
+    b.add_argument("--rates", default=None, metavar="HZ,...",
+                   help="perception: also score each configuration on the frames decimated to these rates "
+                        "(e.g. 30,15,10,5), rows named config@RATEHz")
     b.add_argument("--config", default="dodt", help="runtime: the configuration; loop: the perception mode")
     b.add_argument("--frames", type=_whole(1, 100_000), default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
@@ -645,6 +665,10 @@ def build_parser() -> argparse.ArgumentParser:
     pk.add_argument("--quality", type=_whole(1, 101), default=90, help="WebP quality 1-100, or 101 for lossless")
     pk.set_defaults(func=_cmd_pack_detector_data)
 
+    from experiments.perceive import add_parser as add_perceive
+
+    add_perceive(sub)
+
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)
 
@@ -671,7 +695,7 @@ def main(argv: list[str] | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, _terminated)
     try:
         return args.func(args)
-    except (ScenarioError, UserError, ModelError) as e:
+    except (ScenarioError, UserError, ModelError, SequenceError) as e:
         print(f"dodt-nav: error: {e}", file=sys.stderr)
         return 2
     except OSError as e:

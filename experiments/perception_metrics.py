@@ -18,7 +18,11 @@ a pair counting only within ``match_distance`` (0.5 m).
 - recall by distance: the same, counted in bins of camera distance out to 10 m (the paper's
   Fig. 10: the learned module's range extension); people beyond 5 m count when they show at
   least ``min_visible_px`` pixels (without segmentation: centre in view within 10 m);
-- id switches: a person matched by a different track id than the last time it was matched.
+- id switches: a person matched by a different track id than the last time it was matched;
+- speed of static tracks: the reported horizontal speed of every track labelled static, in every
+  frame (``static_speed_p95``), and of every track, whatever its label, lying farther than
+  ``still_distance`` (1 m) from every person (``still_speed_p95``): what a planner that reads every
+  obstacle's velocity gets from obstacles that do not move.
 """
 from __future__ import annotations
 
@@ -57,12 +61,21 @@ class PerceptionMetrics:
     visible_by_bin: list = field(default_factory=lambda: [0] * (len(RECALL_BINS) - 1))
     recalled_by_bin: list = field(default_factory=lambda: [0] * (len(RECALL_BINS) - 1))
     frames: int = 0
+    still_distance: float = 1.0
+    static_speeds: list = field(default_factory=list)
+    still_speeds: list = field(default_factory=list)
     last_id: dict = field(default_factory=dict)
     series: list = field(default_factory=list)  # (t, mean pos err of the frame, mean vel err) for plots
 
     def add(self, result, truth, K: CameraIntrinsics) -> None:
         self.frames += 1
         people = [o for o in truth.obstacles if o.kind == "person"]
+        for o in getattr(result, "obstacles", ()):
+            speed = float(np.hypot(o.velocity[0], o.velocity[1]))
+            if not o.dynamic:
+                self.static_speeds.append(speed)
+            if all(np.linalg.norm(o.center[:2] - p.center[:2]) > self.still_distance for p in people):
+                self.still_speeds.append(speed)
         dyn = list(result.dynamic)
         self.dynamic_reports += len(dyn)
         pairs = []
@@ -120,6 +133,9 @@ class PerceptionMetrics:
     def summary(self) -> dict:
         def mean(x):
             return float(np.mean(x)) if x else float("nan")
+
+        def p95(x):
+            return float(np.percentile(x, 95)) if x else float("nan")
         return {"pos_err": mean(self.pos_err), "pos_err_3d": mean(self.pos_err_3d), "vel_err": mean(self.vel_err),
                 "pos_err_beyond": mean(self.pos_err_beyond), "vel_err_beyond": mean(self.vel_err_beyond),
                 "matched_beyond": len(self.pos_err_beyond),
@@ -131,7 +147,9 @@ class PerceptionMetrics:
                 "recall_beyond_4m": (sum(self.recalled_by_bin[3:]) / sum(self.visible_by_bin[3:])
                                      if sum(self.visible_by_bin[3:]) else float("nan")),
                 "id_switches": self.id_switches, "matched": len(self.pos_err), "dynamic_reports": self.dynamic_reports,
-                "false_dynamic": self.false_dynamic, "duplicates": self.duplicates, "visible_people": self.visible_people, "frames": self.frames}
+                "false_dynamic": self.false_dynamic, "duplicates": self.duplicates, "visible_people": self.visible_people, "frames": self.frames,
+                "static_speed_p95": p95(self.static_speeds), "still_speed_p95": p95(self.still_speeds),
+                "static_tracks": len(self.static_speeds)}
 
     @staticmethod
     def combine(parts: list["PerceptionMetrics"]) -> dict:
@@ -142,6 +160,8 @@ class PerceptionMetrics:
             m.vel_err += p.vel_err
             m.pos_err_beyond += p.pos_err_beyond
             m.vel_err_beyond += p.vel_err_beyond
+            m.static_speeds += p.static_speeds
+            m.still_speeds += p.still_speeds
             for k in ("dynamic_reports", "false_dynamic", "duplicates", "visible_people", "recalled_people",
                       "id_switches", "frames"):
                 setattr(m, k, getattr(m, k) + getattr(p, k))

@@ -139,7 +139,8 @@ class DODTPerception:
             return False
         if m.measured and o.coasting:
             return False
-        speed = float(np.hypot(o.velocity[0], o.velocity[1]))
+        v = o.velocity if o.filter_velocity is None else o.filter_velocity  # a static track reports none
+        speed = float(np.hypot(v[0], v[1]))
         if not (max(o.size[0], o.size[1]) <= m.max_footprint and m.min_speed <= speed <= m.max_speed):
             return False
         if o.id in self._on_structure:
@@ -182,8 +183,11 @@ class DODTPerception:
         for o in r.obstacles:
             if not (o.dynamic or self._moving(o, frame)):
                 continue
-            preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=o.velocity,
-                                            acceleration=o.acceleration, position_std=o.position_std))
+            # the filter's velocity: a track the moving rule passes may be labelled static (zero velocity)
+            v = o.velocity if o.filter_velocity is None else o.filter_velocity
+            a = o.acceleration if o.filter_acceleration is None else o.filter_acceleration
+            preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=v,
+                                            acceleration=a, position_std=o.position_std))
             # The map is freed under DODT's dynamic tracks; under a track dynamic only by the learned
             # detector's person label, only while it moves: a misplaced person box lifted onto a
             # wall would otherwise open a hole in the wall (ours; dodt without the module has no

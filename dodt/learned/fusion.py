@@ -83,8 +83,10 @@ class YoloMAD:
         from dodt.learned.model import PersonDetector2D
 
         self.cfg = cfg
-        self.detector = detector or PersonDetector2D(cfg.model or None, cfg.score_threshold, cfg.nms_iou, cfg.threads,
-                                                     views=cfg.views, soft_sigma=cfg.soft_nms_sigma)
+        self.detector = detector or PersonDetector2D(
+            cfg.model or None, cfg.score_threshold, cfg.nms_iou, cfg.threads, views=cfg.views,
+            soft_sigma=cfg.soft_nms_sigma, layout=cfg.layout, person_class=cfg.person_class,
+            input_size=cfg.input_size, channels=cfg.channels, pixel_scale=cfg.pixel_scale, letterbox=cfg.letterbox)
         self.frames_without_color = 0
         self._keep(np.zeros((0, 4), np.float32), np.zeros(0, np.float32), [], 0.0, 0.0)
 

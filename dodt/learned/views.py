@@ -69,8 +69,8 @@ def parse_views(names: Sequence[str] | str) -> tuple[View, ...]:
     return tuple(VIEWS[n] for n in names)
 
 
-def view_image(color: np.ndarray, view: View) -> np.ndarray:
-    """The network's input image (INPUT_H, INPUT_W, 3) uint8 for one view of ``color``."""
+def view_region(color: np.ndarray, view: View) -> np.ndarray:
+    """The part of ``color`` one view shows (mirrored if it is), at the image's resolution."""
     if view.is_whole:
         img = color
     else:
@@ -80,7 +80,12 @@ def view_image(color: np.ndarray, view: View) -> np.ndarray:
         img = color[y0:y1, x0:x1]
     if view.mirrored:
         img = img[:, ::-1]
-    return layout.resize_for_network(np.ascontiguousarray(img))
+    return np.ascontiguousarray(img)
+
+
+def view_image(color: np.ndarray, view: View) -> np.ndarray:
+    """The shipped network's input image (INPUT_H, INPUT_W, 3) uint8 for one view of ``color``."""
+    return layout.resize_for_network(view_region(color, view))
 
 
 def _inner_sides(view: View) -> tuple[bool, bool, bool, bool]:
@@ -166,18 +171,24 @@ def suppress(boxes: np.ndarray, scores: np.ndarray, iou: float, soft_sigma: floa
     return boxes[good], scores[good]
 
 
-def detect(run: Callable[[np.ndarray], np.ndarray], color: np.ndarray, views: Sequence[View],
-           score_threshold: float, iou: float, floor: float = 0.05,
-           soft_sigma: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def detect(run: Callable[[np.ndarray], np.ndarray] | None, color: np.ndarray, views: Sequence[View],
+           score_threshold: float, iou: float, floor: float = 0.05, soft_sigma: float = 0.0,
+           infer: Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]] | None = None
+           ) -> tuple[np.ndarray, np.ndarray]:
     """People in ``color``: boxes (K, 4) as fractions of the image and scores, after fusion and
     non-maximum suppression at ``iou`` (soft-NMS with ``soft_sigma`` when it is above 0), at least
-    ``score_threshold``. ``run`` maps a network input image to the raw (5, GRID_H, GRID_W) output.
-    One whole, unmirrored view is the plain decode and suppression; several views' boxes from
-    ``floor`` up are fused first."""
+    ``score_threshold``. ``run`` maps the shipped network's input image to its raw (5, GRID_H,
+    GRID_W) output; or ``infer`` maps an image region and a score floor to boxes (fractions of the
+    region) and scores, for a model of another layout (dodt.learned.yolo). One whole, unmirrored
+    view is the plain decode and suppression; several views' boxes from ``floor`` up are fused
+    first."""
+    if infer is None:
+        def infer(region, thr):
+            return layout.decode(run(layout.resize_for_network(region)), thr)
     views = tuple(views)
     if len(views) == 1 and views[0].is_whole and not views[0].mirrored:
-        boxes, scores = layout.decode(run(view_image(color, views[0])), score_threshold)
+        boxes, scores = infer(color, score_threshold)
         return suppress(boxes, scores, iou, soft_sigma, score_threshold)
-    per_view = [to_image(*layout.decode(run(view_image(color, v)), floor), v) for v in views]
+    per_view = [to_image(*infer(view_region(color, v), floor), v) for v in views]
     boxes, scores = fuse(per_view, views, iou)
     return suppress(boxes, scores, iou, soft_sigma, score_threshold)

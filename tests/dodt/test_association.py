@@ -262,7 +262,7 @@ def test_one_moving_box_keeps_one_id(name):
         assert not out[0].coasting
     o = out[0]
     np.testing.assert_allclose(o.center, walker(t), atol=0.05)
-    np.testing.assert_allclose(o.velocity, (0.0, 1.0, 0.0), atol=0.1)
+    np.testing.assert_allclose(o.filter_velocity, (0.0, 1.0, 0.0), atol=0.1)
     assert o.age == pytest.approx(59 / FPS)
     assert o.history.shape[1] == 4 and len(o.history) == 60
     np.testing.assert_allclose(o.history[-1, 1:], walker(t), atol=0.05)  # filtered centres
@@ -290,7 +290,7 @@ def test_track_coasts_through_a_short_gap_and_keeps_its_id(name):
         out = feed(t, [walker(t)])
         assert [o.id for o in out] == [1]
         assert not out[0].coasting
-    np.testing.assert_allclose(out[0].velocity[:2], (0.0, 1.0), atol=0.1)
+    np.testing.assert_allclose(out[0].filter_velocity[:2], (0.0, 1.0), atol=0.1)
 
 
 @pytest.mark.parametrize("name", PRESETS)
@@ -392,7 +392,7 @@ def test_constant_velocity_target_does_not_overshoot():
     for k in range(40):
         t = k / FPS
         out = feed(t, [walker(t)])
-        speeds.append(out[0].velocity[1])
+        speeds.append(out[0].filter_velocity[1])
     assert max(speeds) < 1.1
 
 
@@ -403,7 +403,7 @@ def test_constant_velocity_target_does_not_overshoot():
 ])
 def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
     """A person track 8 m away, beyond the point cloud's 5.5 m but within the learned detector's
-    10 m, loses its boxes. After seen_through_after missed frames it is dropped when the depth
+    10 m, loses its boxes. From seen_through_after (7 frames) after its last box it is dropped when the depth
     image shows clearly farther than it in its image region, and coasts on otherwise."""
     import dataclasses
 
@@ -418,7 +418,7 @@ def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
     for k in range(5):  # standing, so the coasting prediction stays put
         feed(k / FPS, [np.array([8.0, 0.0, 0.9])], person=True)
     assert feed.tracker.tracks[0].is_person
-    for k in range(5, 5 + cfg.track.seen_through_after + 1):
+    for k in range(5, 5 + round(cfg.track.seen_through_after * FPS) + 1):
         feed(k / FPS, [])
         feed.tracker.drop_seen_through(depth, K, T)
     assert (feed.tracker.tracks == []) == dropped
@@ -433,13 +433,13 @@ def test_a_far_person_track_seen_through_is_dropped(wall_x, learned, dropped):
 ])
 def test_an_unseen_coasting_person_track_is_dropped(case, dropped):
     """A standing person track 4 m in front of the camera loses its detections. After
-    learned.unseen_after missed frames it is dropped when its place is in full view, nothing
+    learned.unseen_after (4 frames here) it is dropped when its place is in full view, nothing
     nearer hides it and no 2D person box of the frame overlaps its image box."""
     from tests.dodt.synthetic import camera_pose, render_depth
     from dodt.frames import CameraIntrinsics
 
     cfg = DODTConfig()
-    after = 0 if case == "off" else 4
+    after = 0 if case == "off" else 4 / FPS
     cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after))
     K, T = CameraIntrinsics(), camera_pose(z=1.2)
     boxes = [((9.0, -3.0, 0.0), (9.2, 3.0, 3.0))]  # a wall 5 m behind the place
@@ -486,13 +486,13 @@ def test_the_pipeline_drops_an_unseen_person_track(after, gone):
     """DODT.process applies the unseen-person rule with the learned module's 2D boxes of the frame:
     a person track whose boxes stop, with nothing behind it within the camera's range (no valid
     depth: the seen-through rule cannot drop it), is gone 8 frames later with
-    learned.unseen_after = 6, and still coasting with the rule off."""
+    learned.unseen_after = 6 frames, and still coasting with the rule off."""
     from dodt.frames import CameraIntrinsics, SensorFrame
     from dodt.pipeline import DODT
     from tests.dodt.synthetic import camera_pose
 
     cfg = DODTConfig()
-    cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after))
+    cfg = replace(cfg, learned=replace(cfg.learned, enabled=True, unseen_after=after / FPS))
     K, T = CameraIntrinsics(), camera_pose(z=1.2)
     depth_mm = np.zeros((K.height, K.width), np.uint16)
     color = np.zeros((K.height, K.width, 3), np.uint8)
@@ -568,3 +568,21 @@ def test_velocity_is_differenced_between_detections_of_one_kind(same_kind):
         assert max(errs) < 0.05
     else:
         assert np.mean(errs) > 0.15
+
+
+def test_a_static_track_reports_no_velocity_and_keeps_its_filter_velocity():
+    """A track that identification has not called dynamic (here: never identified) says it is
+    still: zero velocity and acceleration, whatever its filter estimates, which
+    ``filter_velocity`` and ``filter_acceleration`` keep."""
+    feed = Feed(DODTConfig())
+    for k in range(20):
+        out = feed(k / FPS, [walker(k / FPS)])
+    o = out[0]
+    assert not o.dynamic
+    assert np.all(o.velocity == 0) and np.all(o.acceleration == 0)
+    assert o.filter_velocity[1] > 0.5 and o.filter_acceleration.shape == (3,)
+    assert o.to_json()["velocity"] == [0.0, 0.0, 0.0] and o.to_json()["filter_velocity"][1] > 0.5
+    # dynamic, it reports the filter's velocity
+    feed.tracker.tracks[0].geometric_dynamic = True
+    o = feed.tracker.tracks[0].output(19 / FPS)
+    assert o.dynamic and np.array_equal(o.velocity, o.filter_velocity)

@@ -287,6 +287,60 @@ def test_non_finite_timestamp_skips_the_frame(stamp):
     assert r.skipped is None
 
 
+@pytest.mark.parametrize("absurd", [1e300, 1e9, 50.0, -1e300])
+def test_one_absurd_timestamp_is_skipped_and_the_rest_go_on(absurd):
+    """A single stamp far ahead of (or behind) the others does not become the clock: the frame is
+    skipped and counted, and the next frames are processed with the same tracks."""
+    p = DODT()
+    before = walk(p, 5)[-1]
+    r = p.process(frame(scene(), absurd))
+    assert r.skipped == "skipped_time" and p.counters["skipped_time"] == 1
+    assert r.stamp == before.stamp
+    after = walk(p, 5, t0=5 / FPS, y0=-0.5 + 0.9 * 5 / FPS)
+    assert all(x.skipped is None for x in after)
+    assert {pillar(x).id for x in after} == {pillar(before).id}
+    assert p.counters["skipped_time"] == 1 and p.counters["restarted_after_gap"] == 0
+    assert pillar(after[-1]).velocity[1] > 0.5
+
+
+@pytest.mark.parametrize("new_clock", [1000.0, -500.0])
+def test_a_clock_that_jumps_for_good_is_followed_after_a_few_frames(new_clock):
+    """A clock that really jumps (ahead, or back to an earlier time) is taken once
+    depth.confirm_jump_frames frames in a row run on from the jump: those before are skipped and
+    counted, then the tracks restart on the new time."""
+    p = DODT()
+    walk(p, 5)
+    n = p.cfg.depth.confirm_jump_frames
+    assert n == 3
+    results = walk(p, 6, t0=new_clock)
+    assert [r.skipped for r in results] == ["skipped_time"] * (n - 1) + [None] * (6 - n + 1)
+    assert p.counters["skipped_time"] == n - 1 and p.counters["restarted_after_gap"] == 1
+    assert results[-1].stamp == pytest.approx(new_clock + 5 / FPS)
+    assert len(results[-1].obstacles) >= 1
+    assert_finite(results[-1])
+
+
+def test_an_absurd_first_stamp_is_left_behind():
+    """The first frame's stamp is taken as it is; when it was absurd the frames after it are a
+    clock jump, taken after depth.confirm_jump_frames of them."""
+    p = DODT()
+    assert p.process(frame(scene(), 1e300)).skipped is None
+    results = walk(p, 6)
+    assert [r.skipped for r in results][:3] == ["skipped_time", "skipped_time", None]
+    assert all(r.skipped is None for r in results[2:])
+    assert p.counters["restarted_after_gap"] == 1
+
+
+def test_a_stuck_clock_is_never_taken_for_a_jump():
+    """Frames repeating one old stamp are skipped, however many come."""
+    p = DODT()
+    before = walk(p, 5)[-1]
+    for _ in range(10):
+        assert p.process(frame(scene(), 0.0)).skipped == "skipped_time"
+    assert p.counters["restarted_after_gap"] == 0
+    assert p.process(frame(scene(), before.stamp + 1 / FPS)).skipped is None
+
+
 def test_gap_longer_than_the_coast_time_restarts_the_tracks():
     p = DODT()
     assert p.cfg.track.coast_time == 1.0
@@ -316,6 +370,12 @@ def test_no_coast_preset_tracks_at_30_hz():
 # --------------------------------------------------------------------------- malformed frames
 
 
+def scaled(depth_scale) -> SensorFrame:
+    """A uint16 frame of the wall with the given depth scale."""
+    return SensorFrame(depth=np.full((K.height, K.width), 3000, np.uint16), color=None, intrinsics=K,
+                       T_world_camera=T0, stamp=0.0, depth_scale=depth_scale)
+
+
 @pytest.mark.parametrize("make, match", [
     (lambda: frame(np.zeros((240, 320), np.float32), 0.0), r"320x240 but the intrinsics are for 640x480"),
     (lambda: frame(np.zeros((480, 640), np.int32), 0.0), r"dtype int32"),
@@ -331,8 +391,14 @@ def test_no_coast_preset_tracks_at_30_hz():
     (lambda: frame(wall(), 0.0, T=np.eye(4)[:, :3]), r"T_world_camera must be 4x4, got shape \(4, 3\)"),
     (lambda: frame(wall(), 0.0, intrinsics=CameraIntrinsics(fx=0.0)), r"fx, fy must be finite and positive"),
     (lambda: frame(wall(), 0.0, intrinsics=CameraIntrinsics(fy=np.nan)), r"fx, fy must be finite and positive"),
+    (lambda: scaled(np.nan), r"depth_scale .* must be a finite number above 0, got nan"),
+    (lambda: scaled(0.0), r"depth_scale .* must be a finite number above 0, got 0.0"),
+    (lambda: scaled(-0.001), r"depth_scale .* must be a finite number above 0, got -0.001"),
+    (lambda: scaled("0.001"), r"depth_scale .* must be a finite number above 0, got '0.001'"),
+    (lambda: frame(wall(), 0.0, T=pose(R_LOOK_X @ np.diag([1.0, -1.0, 1.0]))), r"determinant -1: a reflection"),
 ], ids=["shape-vs-intrinsics", "int32", "float16", "3-D", "1-D", "list", "color-shape", "color-2-D",
-        "color-dtype", "pose-3x3", "pose-3x4", "pose-4x3", "fx-zero", "fy-nan"])
+        "color-dtype", "pose-3x3", "pose-3x4", "pose-4x3", "fx-zero", "fy-nan", "scale-nan", "scale-zero",
+        "scale-negative", "scale-string", "mirrored-pose"])
 def test_malformed_frame_raises_a_value_error_naming_the_problem(make, match):
     p = DODT()
     with pytest.raises(ValueError, match=match):
@@ -451,3 +517,62 @@ def test_random_pose_on_the_pillar_scene_stays_finite(T, n_frames_nan):
         r = p.process(frame(d, k / FPS, T=Tk))
         assert r.skipped is None
         assert_finite(r)
+
+
+# absolute stamps, or steps from the last one: small, zero, backwards, jumps, non-finite
+STAMP_EVENTS = st.one_of(
+    st.tuples(st.just("step"), st.floats(1e-3, 0.4)),
+    st.tuples(st.just("step"), st.sampled_from([0.0, 5e-324, 1e-9, -1e-3, -0.5, 11.0, 1e6])),
+    st.tuples(st.just("at"), st.sampled_from([np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0, 1e15])),
+)
+DEPTH_KINDS = st.sampled_from(["scene", "sprinkled", "nan", "zeros", "uint16", "inf-rows"])
+
+
+def depth_of(kind: str, k: int, rng) -> tuple[np.ndarray, float]:
+    d = scene((2.0, -0.5 + 0.03 * k))
+    if kind == "sprinkled":
+        d.flat[rng.choice(d.size, 5000, replace=False)] = rng.choice([np.nan, np.inf, -np.inf, -2.0, 1e30], 5000)
+    elif kind == "nan":
+        d[:] = np.nan
+    elif kind == "zeros":
+        d[:] = 0.0
+    elif kind == "inf-rows":
+        d[::3] = np.inf
+    elif kind == "uint16":
+        scale = float(rng.choice([0.001, 0.0002, 0.00025]))
+        return np.clip(np.round(d / scale), 0, 65535).astype(np.uint16), scale
+    return d, 0.001
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(STAMP_EVENTS, st.booleans(), DEPTH_KINDS), min_size=2, max_size=12), poses(),
+       st.integers(0, 2**31 - 1))
+def test_random_stamps_poses_and_depth_never_raise_and_recover(events, T, seed):
+    """Any sequence of stamps (steps, repeats, reversals, jumps, NaN, inf, 1e300), poses (some
+    non-finite) and depth images (NaN, inf, zeros, uint16 at any scale) is processed without an
+    exception, every output is finite, every frame is counted once, and a camera that then runs
+    on at a sane clock is processed again within depth.confirm_jump_frames frames."""
+    rng = np.random.default_rng(seed)
+    p = DODT()
+    stamp = 0.0
+    skipped = 0
+    for k, ((how, value), bad_pose, kind) in enumerate(events):
+        stamp = value if how == "at" else (stamp + value if math.isfinite(stamp) else value)
+        Tk = T.copy()
+        Tk[:3, 3] += (0.02 * k, 0.0, 0.0)
+        if bad_pose:
+            Tk[int(rng.integers(0, 3)), int(rng.integers(0, 4))] = rng.choice([np.nan, np.inf])
+        d, scale = depth_of(kind, k, rng)
+        r = p.process(SensorFrame(depth=d, color=None, intrinsics=K, T_world_camera=Tk, stamp=stamp, seq=k,
+                                  depth_scale=scale))
+        assert r.skipped in (None, "skipped_time", "skipped_bad_pose")
+        skipped += r.skipped is not None
+        assert_finite(r)
+        assert math.isfinite(r.stamp)
+    assert p.counters["frames"] == len(events)
+    assert p.counters["skipped_time"] + p.counters["skipped_bad_pose"] == skipped
+    n = p.cfg.depth.confirm_jump_frames
+    for j in range(n + 1):
+        r = p.process(frame(scene(), 1e7 + j / FPS, T=T))
+        assert_finite(r)
+    assert r.skipped is None

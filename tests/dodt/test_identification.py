@@ -1,4 +1,6 @@
 """Dynamic identification (dodt.identification): point voting, the candidate test, consistency."""
+import math
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -6,6 +8,7 @@ from scipy.spatial import cKDTree
 from dodt.config import IdentificationConfig
 from dodt.frames import CameraIntrinsics
 from dodt.identification import decide, is_candidate, vote
+from dodt.windows import FrameClock
 from tests.dodt.synthetic import camera_pose
 
 K = CameraIntrinsics()
@@ -89,32 +92,64 @@ def test_velocity_method_needs_speed_only():
     assert is_candidate(0.5, 0, 0, 10, cfg) and not is_candidate(0.1, 0, 0, 0, cfg)
 
 
+def frames_of(span: float, rate: float = 30.0) -> int:
+    """How many frames a window of ``span`` seconds holds at ``rate``: the intervals it covers
+    (rounded up beyond a quarter period), at least one once it spans time, plus one."""
+    return 1 + max(math.ceil(span * rate - 0.25), 1 if span > 0 else 0)
+
+
+def decide_at(candidates: list[bool], history: list[bool], cfg=CFG, rate: float = 30.0) -> bool:
+    """decide() at a steady frame ``rate``."""
+    clock = FrameClock()
+    for _ in range(3):
+        clock.observe(1.0 / rate)
+    return decide(candidates, history, cfg, clock)
+
+
 def test_consistency_and_hysteresis():
-    n = CFG.consistency
-    assert not decide([True] * (n - 1), [], CFG)
-    assert decide([False] + [True] * n, [], CFG)
+    n = frames_of(CFG.consistency_span)
+    assert n == 3  # the reference code's 3 frames at 30 Hz
+    assert not decide_at([True] * (n - 1), [])
+    assert decide_at([False] + [True] * n, [])
     # once dynamic for long enough, a few non-candidate frames keep it dynamic ...
-    history = [True] * CFG.force_dynamic_window
-    assert decide([True] * 20 + [False] * 3, history, CFG)
-    # ... but not when it was dynamic in fewer than force_dynamic_count of the window
-    history = [False] * (CFG.force_dynamic_window - CFG.force_dynamic_count + 1) + [True] * (CFG.force_dynamic_count - 1)
-    assert not decide([False], history, CFG)
+    w = frames_of(CFG.force_dynamic_span)
+    assert w == 30
+    history = [True] * w
+    assert decide_at([True] * 20 + [False] * 3, history)
+    # ... but not when it was dynamic in fewer than a third of the window (10 of 30 frames)
+    history = [False] * (w - 10 + 1) + [True] * (10 - 1)
+    assert not decide_at([False], history)
+    assert decide_at([False], [False] * (w - 10) + [True] * 10)
+
+
+@pytest.mark.parametrize("rate", [60.0, 20.0, 15.0, 10.0, 5.0])
+def test_consistency_is_a_span_of_time(rate):
+    """At any frame rate a track turns dynamic once every frame within consistency_span (2 / 30 s)
+    was a candidate: 3 frames at 30 Hz, 5 at 60 Hz, 2 at 15 and 20 Hz, and at 10 Hz and below,
+    where a frame interval is longer than the span, the frame itself."""
+    n = {60.0: 5, 20.0: 2, 15.0: 2, 10.0: 1, 5.0: 1}[rate]
+    assert not decide_at([True] * (n - 1) if n > 1 else [False], [], rate=rate)
+    assert decide_at([True] * n, [], rate=rate)
+    assert not decide_at([True] * n + [False], [], rate=rate)
+    w = frames_of(CFG.force_dynamic_span, rate)
+    assert decide_at([False], [True] * w, rate=rate)
+    assert not decide_at([False], [False] * w, rate=rate)
 
 
 def test_a_young_dynamic_track_is_released_only_after_release_frames_non_candidates():
-    n, r = CFG.consistency, CFG.release_frames
-    assert r > 0
+    n, r = frames_of(CFG.consistency_span), frames_of(CFG.release_span)
+    assert r == 3
     cand = [True] * n
     history = [False] * (n - 1) + [True]  # dynamic since the last frame, far younger than the window
     # one, or r - 1, frames that are no candidates keep it dynamic ...
-    assert decide(cand + [False], history, CFG)
-    assert decide(cand + [False] * (r - 1), history + [True] * (r - 2), CFG)
+    assert decide_at(cand + [False], history)
+    assert decide_at(cand + [False] * (r - 1), history + [True] * (r - 2))
     # ... r in a row release it, and a track that was static is not held dynamic by the rule
-    assert not decide(cand + [False] * r, history + [True] * (r - 1), CFG)
-    assert not decide(cand[:-1] + [False], [False] * n, CFG)
-    # release_frames = 0 is the reference code's rule: released at the first non-candidate frame
-    ref = IdentificationConfig(release_frames=0)
-    assert not decide(cand + [False], history, ref)
+    assert not decide_at(cand + [False] * r, history + [True] * (r - 1))
+    assert not decide_at(cand[:-1] + [False], [False] * n)
+    # release_span = None is the reference code's rule: released at the first non-candidate frame
+    ref = IdentificationConfig(release_span=None)
+    assert not decide_at(cand + [False], history, ref)
 
 
 def test_the_old_cloud_cropped_to_matching_reach_gives_the_same_vote():
@@ -143,7 +178,7 @@ def _slab_track_candidates(cfg, frame_points, velocity) -> list[bool]:
     from dodt.tracker import Track
 
     dt = 1 / 30
-    clouds, track = {}, None
+    clouds, track, candidates = {}, None, []
     for k, pts in enumerate(frame_points):
         clouds[k] = pts
         det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="dbscan", points=pts)
@@ -154,7 +189,8 @@ def _slab_track_candidates(cfg, frame_points, velocity) -> list[bool]:
             track.update(det, k, k * dt)
         track.kf.x[2:4] = velocity
         track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
-    return list(track.candidates)
+        candidates.append(track.candidates[-1])
+    return candidates
 
 
 @pytest.mark.parametrize("moving", [False, True])
@@ -189,7 +225,7 @@ def test_an_obstacle_wider_than_any_walker_is_not_voted_on():
 
 def test_a_person_label_does_not_lock_a_standing_obstacle_dynamic():
     """A standing obstacle that a learned detector called a person for 15 frames is dynamic while
-    the label lasts (from its third frame: learned.person_min of the last person_window boxes),
+    the label lasts (from its third frame: all boxes over learned.person_span),
     and static again at its first frame without one: the person label does not feed the
     geometric label's force-dynamic lock (10 dynamic frames of the last 30)."""
     from dodt.config import DODTConfig
@@ -211,7 +247,7 @@ def test_a_person_label_does_not_lock_a_standing_obstacle_dynamic():
             track.update(det, k, k * dt)
         track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
         labels.append(track.dynamic)
-    assert (cfg.learned.person_min, cfg.learned.person_window) == (3, 3)
+    assert (cfg.learned.person_span, cfg.learned.person_fraction) == (2 / 30, 1.0)
     assert not any(labels[:2]) and all(labels[2:15])  # the last 3 boxes were person boxes: dynamic
     assert not any(labels[15:])  # one of the last 3 was not
     assert not track.geometric_dynamic

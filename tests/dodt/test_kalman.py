@@ -2,7 +2,7 @@
 
 The convergence tests feed the filter the same kind of measurement the tracker does:
 position, plus velocity and acceleration as finite-difference pseudo-measurements over up to
-``averaging_frames`` frames of (noisy) detected positions (dodt.tracker.Track.update). A test
+``averaging_time`` (10 frames at 30 Hz) of (noisy) detected positions (dodt.tracker.Track.update). A test
 checks that the helper below builds exactly what the tracker builds.
 """
 from __future__ import annotations
@@ -32,7 +32,8 @@ def trajectory(t: float) -> tuple[np.ndarray, np.ndarray]:
 class PseudoMeasurements:
     """[x, y, vx, vy, ax, ay] as dodt.tracker.Track.update builds them.
 
-    v = (p_now - p_prev) / dt with p_prev the observation up to ``averaging_frames`` back;
+    v = (p_now - p_prev) / dt with p_prev the observation up to ``averaging_frames`` back (at a
+    steady frame rate, the oldest within the tracker's averaging_time);
     a = (v - v_prev) / dt with v_prev the pseudo-velocity stored with that observation; the
     first observation has none, and then a is the filter's own acceleration estimate (no
     innovation).
@@ -68,7 +69,7 @@ def run_filter(model: str, seed: int, noise: float = NOISE, **cfg_overrides):
     cfg = KalmanConfig(model=model, **(REF_NOISE | cfg_overrides))
     rng = np.random.default_rng(seed)
     times = np.arange(0.0, DURATION + 1e-9, 1.0 / FPS)
-    meas = PseudoMeasurements(cfg.averaging_frames)
+    meas = PseudoMeasurements(round(cfg.averaging_time * FPS))
     kf = None
     pos_err, vel_err, raw_err, states = [], [], [], []
     for k, t in enumerate(times):
@@ -217,7 +218,7 @@ def test_pseudo_measurements_match_the_tracker():
     fed = []
     real_update = track.kf.update
     track.kf.update = lambda z, **kw: (fed.append(np.array(z, float)), real_update(z, **kw))
-    meas = PseudoMeasurements(cfg.kalman.averaging_frames)
+    meas = PseudoMeasurements(round(cfg.kalman.averaging_time * FPS))
     meas.first(times[0], d0.center[:2])
     built = []
     for k, t in enumerate(times[1:], start=1):
@@ -283,11 +284,11 @@ def test_ca_beats_cv_without_noise():
 
     Neither reaches zero: the finite-difference velocity over the window is the mean velocity
     of the window, i.e. the velocity half a window ago, fed as the current one; so its floor is
-    |a| * (averaging_frames / 30 Hz) / 2 (0.112 m/s for 15 frames). Measured with 15 frames:
+    |a| * averaging_time / 2 (0.112 m/s for 15 frames at 30 Hz). Measured with 15 frames:
     last-second velocity error 0.110 m/s for CA, 0.140 m/s for CV."""
     ca = run_filter("ca", 0, noise=0.0)
     cv = run_filter("cv", 0, noise=0.0)
-    lag = np.linalg.norm(ACC) * KalmanConfig().averaging_frames / FPS / 2
+    lag = np.linalg.norm(ACC) * KalmanConfig().averaging_time / 2
     assert ca[1][LAST].mean() < 0.9 * cv[1][LAST].mean()
     assert ca[1][LAST].mean() < 1.1 * lag
     assert ca[0][LAST].mean() < 0.01

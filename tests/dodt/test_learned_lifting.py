@@ -172,20 +172,39 @@ def test_a_track_is_a_person_only_when_person_boxes_recur():
     from dodt.tracker import Track
 
     cfg = DODTConfig()
-    assert (cfg.learned.person_min, cfg.learned.person_window) == (3, 3)
+    assert (cfg.learned.person_span, cfg.learned.person_fraction) == (2 / 30, 1.0)  # 3 of 3 frames at 30 Hz
     tr = Track(1, _box((3, 0, 0.85), person=True), 0, 0.0, cfg)
-    assert not tr.is_person  # one box: 1 of person_window, fewer than person_min
+    assert not tr.is_person  # one box: the votes do not reach back over person_span
     tr.update(_box((3, 0, 0.85), person=True), 1, 0.033)
     assert not tr.is_person  # 2 of 3
     tr.update(_box((3, 0, 0.85), person=True), 2, 0.067)
     assert tr.is_person  # 3 of the last 3: labelled at its third frame
     tr.update(_box((3, 0, 0.85)), 3, 0.1)
     assert not tr.is_person  # a false box does not label a static obstacle for good
-    loose = replace(cfg, learned=replace(cfg.learned, person_min=2))
+    loose = replace(cfg, learned=replace(cfg.learned, person_fraction=2 / 3))
     tr = Track(2, _box((3, 0, 0.85), person=True), 0, 0.0, loose)
     tr.update(_box((3, 0, 0.85)), 1, 0.033)
     tr.update(_box((3, 0, 0.85), person=True), 2, 0.067)
-    assert tr.is_person  # 2 of the last 3 with person_min = 2
+    assert tr.is_person  # 2 of the last 3 with person_fraction = 2 / 3
+
+
+@pytest.mark.parametrize("rate", [15.0, 10.0, 5.0])
+def test_the_person_label_needs_two_boxes_at_a_low_frame_rate(rate):
+    """person_span is time: below 30 Hz the label needs the boxes of two frames, never one."""
+    from dodt.config import DODTConfig
+    from dodt.tracker import Track
+
+    from dodt.windows import FrameClock
+
+    clock = FrameClock()
+    clock.observe(1 / rate)  # the pipeline's clock, at this rate
+    tr = Track(1, _box((3, 0, 0.85), person=True), 0, 0.0, DODTConfig(), clock)
+    assert not tr.is_person
+    n = 1
+    while not tr.is_person:
+        tr.update(_box((3, 0, 0.85), person=True), n, n / rate)
+        n += 1
+    assert n == 2  # frames of boxes when labelled
 
 
 def test_fusion_does_not_mark_the_wall_behind_a_person_a_person():

@@ -1,0 +1,433 @@
+"""Recorded RGB-D sequences on disk: reading them as sensor frames, and writing the TUM format.
+
+Two layouts are read:
+
+- TUM RGB-D (the format of the TUM RGB-D benchmark): ``rgb/`` and ``depth/`` PNG folders listed by
+  ``rgb.txt`` and ``depth.txt`` (lines ``timestamp path``, ``#`` comments), depth as 16-bit PNG
+  at ``depth_factor`` units per metre (5000), colour registered to depth, and optionally camera
+  poses as lines ``timestamp tx ty tz qx qy qz qw`` (the optical frame in the world, quaternion
+  x, y, z, w; ``groundtruth.txt``). Each depth image is a frame; it takes the colour image of
+  the nearest stamp within ``max_difference`` (0.02 s) and the pose interpolated at its stamp
+  between poses at most ``max_pose_gap`` (0.1 s) apart.
+- This project's ``dodt-nav simulate`` output: ``sensor.json`` with the intrinsics and each
+  frame's stamp, pose and image paths (depth in millimetres).
+
+Depth in whole millimetres (every value of a frame a multiple of depth_factor / 1000: a millimetre
+sensor's depth converted, as ``simulate --format tum`` writes it) is read as millimetres, so its
+metres are bit for bit those the sensor's millimetres give.
+
+Intrinsics come from a small file (JSON ``{"fx", "fy", "cx", "cy"}``, optionally ``width``,
+``height`` and ``depth_factor``; or a text line ``fx fy cx cy``), from options, or from an
+``intrinsics.json`` in the sequence folder. Frames whose files cannot be read, or that have no
+pose where poses are given, are skipped and counted (``Sequence.counters``).
+
+``write_tum`` writes frames in the TUM layout, with stamps at full precision and the intrinsics
+in ``intrinsics.json``: ``dodt-nav simulate --format tum``.
+"""
+from __future__ import annotations
+
+import bisect
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from dodt.frames import CameraIntrinsics, SensorFrame
+
+TUM_DEPTH_FACTOR = 5000.0  # depth units per metre in the TUM RGB-D format
+
+
+class SequenceError(ValueError):
+    """The sequence or its options cannot be read (a user's mistake): the message names the file."""
+
+
+# --------------------------------------------------------------------------- small readers
+
+
+def read_list(path: Path) -> list[tuple[float, str]]:
+    """A TUM list file: (stamp, rest of the line) per line, sorted by stamp; ``#`` lines skipped."""
+    out = []
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError:
+        raise SequenceError(f"{path}: not a text file") from None
+    for i, line in enumerate(lines, 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.split()
+        try:
+            stamp = float(parts[0])
+        except ValueError:
+            raise SequenceError(f"{path}, line {i}: expected 'timestamp ...', got {line[:60]!r}") from None
+        if not math.isfinite(stamp):
+            raise SequenceError(f"{path}, line {i}: the timestamp {parts[0]!r} is not a finite number")
+        out.append((stamp, " ".join(parts[1:])))
+    out.sort(key=lambda e: e[0])
+    return out
+
+
+def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a quaternion (x, y, z, w), normalised first."""
+    x, y, z, w = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Quaternion (x, y, z, w), w >= 0, of a rotation matrix."""
+    R = np.asarray(R, float)
+    t = np.trace(R)
+    if t > 0:
+        s = 2.0 * math.sqrt(t + 1.0)
+        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(max(1.0 + R[i, i] - R[j, j] - R[k, k], 1e-300))
+        q = [0.0] * 4
+        q[i] = 0.25 * s
+        q[j] = (R[j, i] + R[i, j]) / s
+        q[k] = (R[k, i] + R[i, k]) / s
+        q[3] = (R[k, j] - R[j, k]) / s
+    q = np.array(q)
+    return q if q[3] >= 0 else -q
+
+
+def read_poses(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps (N,), quaternion-and-translation rows (N, 7) as tx ty tz qx qy qz qw) of a TUM
+    trajectory file."""
+    rows = read_list(path)
+    stamps, vals = [], []
+    for stamp, rest in rows:
+        parts = rest.split()
+        try:
+            v = [float(x) for x in parts]
+        except ValueError:
+            v = []
+        if len(v) != 7 or not all(math.isfinite(x) for x in v) or np.linalg.norm(v[3:]) < 1e-6:
+            raise SequenceError(f"{path}: the line of stamp {stamp!r} is not 'timestamp tx ty tz qx qy qz qw'")
+        stamps.append(stamp)
+        vals.append(v)
+    if not stamps:
+        raise SequenceError(f"{path}: no poses")
+    return np.array(stamps), np.array(vals)
+
+
+class PoseTrack:
+    """Camera poses at any stamp, interpolated between the two nearest poses (translation linearly,
+    rotation by spherical interpolation) when they are at most ``max_gap`` apart."""
+
+    def __init__(self, stamps: np.ndarray, rows: np.ndarray, max_gap: float = 0.1):
+        self.stamps, self.rows, self.max_gap = stamps, rows, max_gap
+
+    def at(self, stamp: float) -> np.ndarray | None:
+        s = self.stamps
+        i = bisect.bisect_left(s, stamp)
+        if i < len(s) and abs(s[i] - stamp) < 1e-9:
+            return self._matrix(self.rows[i][:3], self.rows[i][3:])
+        if i == 0 or i == len(s) or s[i] - s[i - 1] > self.max_gap:
+            return None
+        a = (stamp - s[i - 1]) / (s[i] - s[i - 1])
+        t = (1 - a) * self.rows[i - 1][:3] + a * self.rows[i][:3]
+        return self._matrix(t, _slerp(self.rows[i - 1][3:], self.rows[i][3:], a))
+
+    @staticmethod
+    def _matrix(t, q) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = quaternion_to_matrix(q)
+        T[:3, 3] = t
+        return T
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
+    q0, q1 = q0 / np.linalg.norm(q0), q1 / np.linalg.norm(q1)
+    d = float(q0 @ q1)
+    if d < 0:
+        q1, d = -q1, -d
+    if d > 0.9995:
+        q = q0 + a * (q1 - q0)
+        return q / np.linalg.norm(q)
+    th = math.acos(d)
+    return (math.sin((1 - a) * th) * q0 + math.sin(a * th) * q1) / math.sin(th)
+
+
+def read_intrinsics(path: Path) -> dict:
+    """{"fx", "fy", "cx", "cy"} and any of "width", "height", "depth_factor" from a JSON file, or
+    fx fy cx cy from the first line of a text file."""
+    text = Path(path).read_text(encoding="utf-8")
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError:
+        parts = text.split()
+        try:
+            vals = [float(x) for x in parts[:4]]
+        except ValueError:
+            vals = []
+        if len(vals) != 4:
+            raise SequenceError(f"{path}: expected JSON with fx, fy, cx, cy or a line 'fx fy cx cy'") from None
+        data = dict(zip(("fx", "fy", "cx", "cy"), vals))
+    if not isinstance(data, dict):
+        raise SequenceError(f"{path}: expected a JSON object with fx, fy, cx, cy")
+    missing = [k for k in ("fx", "fy", "cx", "cy") if k not in data]
+    if missing:
+        raise SequenceError(f"{path}: no {', '.join(missing)}")
+    out = {}
+    for k in ("fx", "fy", "cx", "cy", "width", "height", "depth_factor"):
+        if k in data:
+            try:
+                out[k] = float(data[k])
+            except (TypeError, ValueError):
+                raise SequenceError(f"{path}: {k} must be a number, got {data[k]!r}") from None
+            if not math.isfinite(out[k]):
+                raise SequenceError(f"{path}: {k} must be finite, got {data[k]!r}")
+    return out
+
+
+# --------------------------------------------------------------------------- sequences
+
+
+@dataclass
+class FrameRef:
+    """Where one frame's data is: depth file, colour file (or None), stamp, pose (or None)."""
+
+    seq: int
+    stamp: float
+    depth: Path
+    color: Path | None
+    T_world_camera: np.ndarray | None
+
+
+@dataclass
+class Sequence:
+    """A sequence ready to be read frame by frame (``frames()``)."""
+
+    root: Path
+    format: str  # tum | dodt-sim
+    intrinsics: CameraIntrinsics
+    depth_scale: float  # metres per depth unit
+    refs: list[FrameRef]
+    pose_source: str | None  # the file the poses come from, or None
+    counters: dict = field(default_factory=lambda: {"unreadable": 0, "no_pose": 0, "no_color": 0})
+
+    def frames(self, fixed_pose: np.ndarray | None = None, pose_transform: np.ndarray | None = None,
+               color: bool = True) -> Iterator[tuple[FrameRef, SensorFrame | None]]:
+        """(reference, frame) per frame; the frame is None where its images cannot be read or it
+        has no pose (counted). ``fixed_pose``: the pose of every frame (a fixed camera);
+        ``pose_transform``: a transform applied to every pose from the file (T_new_world);
+        ``color``: False leaves the colour images unread (frames without colour, not counted)."""
+        want_color = color
+        K = self.intrinsics
+        per_mm = 0.001 / self.depth_scale  # depth units per millimetre
+        mm_units = int(round(per_mm)) if per_mm >= 2 and abs(per_mm - round(per_mm)) < 1e-9 else None
+        for ref in self.refs:
+            depth = _read_png(ref.depth, np.uint16)
+            if depth is None or depth.shape != (K.height, K.width):
+                self.counters["unreadable"] += 1
+                yield ref, None
+                continue
+            scale = self.depth_scale
+            if mm_units is not None and not np.any(depth % mm_units):  # whole millimetres
+                depth, scale = depth // mm_units, 0.001
+            color = None
+            if want_color and ref.color is not None:
+                bgr = _read_png(ref.color, np.uint8, color=True)
+                if bgr is not None and bgr.shape[:2] == depth.shape:
+                    color = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+            if want_color and color is None:
+                self.counters["no_color"] += 1
+            T = fixed_pose if fixed_pose is not None else ref.T_world_camera
+            if T is None:
+                self.counters["no_pose"] += 1
+                yield ref, None
+                continue
+            if pose_transform is not None and fixed_pose is None:
+                T = pose_transform @ T
+            yield ref, SensorFrame(depth=depth, color=color, intrinsics=K, T_world_camera=np.array(T, float),
+                                   stamp=ref.stamp, seq=ref.seq, depth_scale=scale)
+
+    def depth_m(self, ref: FrameRef) -> np.ndarray | None:
+        """One frame's depth in metres (0: none), or None when it cannot be read."""
+        d = _read_png(ref.depth, np.uint16)
+        if d is None or d.shape != (self.intrinsics.height, self.intrinsics.width):
+            return None
+        return d.astype(np.float32) * np.float32(self.depth_scale)
+
+
+def _read_png(path: Path, dtype, color: bool = False) -> np.ndarray | None:
+    flags = cv2.IMREAD_COLOR if color else cv2.IMREAD_UNCHANGED
+    try:
+        img = cv2.imread(str(path), flags)
+    except cv2.error:
+        return None
+    if img is None or img.dtype != dtype or (not color and img.ndim != 2):
+        return None
+    return img
+
+
+def _intrinsics(root: Path, options: dict, intrinsics_file: Path | None, size: tuple[int, int]) -> tuple[CameraIntrinsics, dict]:
+    """The camera intrinsics: options override the file given, which overrides the folder's
+    intrinsics.json. Returns them and the values read (for the depth factor)."""
+    values: dict = {}
+    file = intrinsics_file or (root / "intrinsics.json" if (root / "intrinsics.json").is_file() else None)
+    if file is not None:
+        if not Path(file).is_file():
+            raise SequenceError(f"{file}: no such intrinsics file")
+        values.update(read_intrinsics(Path(file)))
+    values.update({k: float(v) for k, v in options.items() if v is not None})
+    missing = [k for k in ("fx", "fy", "cx", "cy") if k not in values]
+    if missing:
+        raise SequenceError(f"{root}: no camera intrinsics ({', '.join(missing)} missing): give --intrinsics FILE "
+                            "or --fx, --fy, --cx, --cy")
+    w, h = size
+    if ("width" in values and int(values["width"]) != w) or ("height" in values and int(values["height"]) != h):
+        raise SequenceError(f"{root}: the intrinsics are for {int(values.get('width', w))}x{int(values.get('height', h))} "
+                            f"but the depth images are {w}x{h}")
+    for k in ("fx", "fy"):
+        if not values[k] > 0:
+            raise SequenceError(f"{root}: intrinsics {k} must be above 0, got {values[k]}")
+    return CameraIntrinsics(width=w, height=h, fx=values["fx"], fy=values["fy"], cx=values["cx"], cy=values["cy"]), values
+
+
+def _first_size(paths) -> tuple[int, int]:
+    for p in paths:
+        d = _read_png(p, np.uint16)
+        if d is not None:
+            return d.shape[1], d.shape[0]
+    raise SequenceError(f"{Path(paths[0]).parent if paths else '?'}: no readable 16-bit depth PNG")
+
+
+def open_sequence(path: str | Path, intrinsics_file: str | Path | None = None, fx=None, fy=None, cx=None,
+                  cy=None, depth_factor: float | None = None, poses: str | Path | None = None,
+                  max_difference: float = 0.02, max_pose_gap: float = 0.1) -> Sequence:
+    """A TUM RGB-D folder or a ``dodt-nav simulate`` output folder, ready to be read.
+
+    ``poses``: a TUM trajectory file (relative to the folder or absolute; default: the folder's
+    groundtruth.txt if there is one; "none": no poses). ``depth_factor``: depth units per metre
+    (default: the intrinsics file's, else 5000 for TUM)."""
+    root = Path(path)
+    if not root.is_dir():
+        raise SequenceError(f"{root}: no such sequence folder")
+    opts = {"fx": fx, "fy": fy, "cx": cx, "cy": cy}
+    if (root / "depth.txt").is_file():
+        return _open_tum(root, intrinsics_file, opts, depth_factor, poses, max_difference, max_pose_gap)
+    if (root / "sensor.json").is_file():
+        return _open_sim(root, intrinsics_file, opts, depth_factor, poses, max_pose_gap)
+    raise SequenceError(f"{root}: neither a TUM RGB-D sequence (depth.txt) nor a dodt-nav simulate output "
+                        "(sensor.json)")
+
+
+def _pose_track(root: Path, poses, max_pose_gap: float) -> tuple[PoseTrack | None, str | None]:
+    if poses == "none":
+        return None, None
+    if poses is None:
+        if not (root / "groundtruth.txt").is_file():
+            return None, None
+        poses = "groundtruth.txt"
+    p = Path(poses)
+    p = p if p.is_absolute() or p.is_file() else root / p
+    if not p.is_file():
+        raise SequenceError(f"{p}: no such pose file")
+    stamps, rows = read_poses(p)
+    return PoseTrack(stamps, rows, max_pose_gap), str(p)
+
+
+def _open_tum(root, intrinsics_file, opts, depth_factor, poses, max_difference, max_pose_gap) -> Sequence:
+    depth_list = read_list(root / "depth.txt")
+    if not depth_list:
+        raise SequenceError(f"{root / 'depth.txt'}: lists no depth images")
+    rgb_list = read_list(root / "rgb.txt") if (root / "rgb.txt").is_file() else []
+    K, values = _intrinsics(root, opts, Path(intrinsics_file) if intrinsics_file else None,
+                            _first_size([root / p for _, p in depth_list[:20]]))
+    factor = depth_factor if depth_factor is not None else values.get("depth_factor", TUM_DEPTH_FACTOR)
+    if not (math.isfinite(factor) and factor > 0):
+        raise SequenceError(f"--depth-factor: must be a number of depth units per metre above 0, got {factor}")
+    track, pose_source = _pose_track(root, poses, max_pose_gap)
+    rgb_stamps = [s for s, _ in rgb_list]
+    refs = []
+    for seq, (stamp, rel) in enumerate(depth_list):
+        color = None
+        if rgb_stamps:
+            i = bisect.bisect_left(rgb_stamps, stamp)
+            best = min((j for j in (i - 1, i) if 0 <= j < len(rgb_stamps)), key=lambda j: abs(rgb_stamps[j] - stamp))
+            if abs(rgb_stamps[best] - stamp) <= max_difference:
+                color = root / rgb_list[best][1]
+        T = track.at(stamp) if track is not None else None
+        refs.append(FrameRef(seq, stamp, root / rel, color, T))
+    return Sequence(root, "tum", K, 1.0 / factor, refs, pose_source)
+
+
+def _open_sim(root, intrinsics_file, opts, depth_factor, poses, max_pose_gap) -> Sequence:
+    try:
+        sensor = json.loads((root / "sensor.json").read_text(encoding="utf-8"))
+        k = sensor["intrinsics"]
+        frames = sensor["frames"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        raise SequenceError(f"{root / 'sensor.json'}: not a dodt-nav simulate sensor file") from None
+    values = {key: k[key] for key in ("fx", "fy", "cx", "cy")}
+    values.update({key: v for key, v in opts.items() if v is not None})
+    if intrinsics_file:
+        values.update(read_intrinsics(Path(intrinsics_file)))
+    K = CameraIntrinsics(width=int(k["width"]), height=int(k["height"]), **{key: float(values[key]) for key in values})
+    scale = float(sensor.get("depth_scale", 0.001)) if depth_factor is None else 1.0 / depth_factor
+    # the poses the frames carry, unless a trajectory file is named
+    track, pose_source = _pose_track(root, poses, max_pose_gap) if poses not in (None, "none") else (None, None)
+    refs = []
+    for f in frames:
+        T = track.at(float(f["stamp"])) if track is not None else np.array(f["T_world_camera"], float)
+        refs.append(FrameRef(int(f["seq"]), float(f["stamp"]), root / f["depth"],
+                             root / f["color"] if f.get("color") else None, T))
+    return Sequence(root, "dodt-sim", K, scale, refs, pose_source or str(root / "sensor.json"))
+
+
+# --------------------------------------------------------------------------- writing
+
+
+class TumWriter:
+    """Writes frames as a TUM RGB-D sequence: rgb/, depth/ (16-bit PNG at 5000 per metre), rgb.txt,
+    depth.txt, the frames' poses as groundtruth.txt (the true camera pose, when given) and
+    odometry.txt (the pose each frame carries), intrinsics.json. Stamps at full precision."""
+
+    def __init__(self, out: Path, intrinsics: CameraIntrinsics):
+        self.out = Path(out)
+        for sub in ("rgb", "depth"):
+            (self.out / sub).mkdir(parents=True, exist_ok=True)
+        self.K = intrinsics
+        self.lines = {"rgb": [], "depth": [], "groundtruth": [], "odometry": []}
+
+    def add(self, frame: SensorFrame, T_true: np.ndarray | None = None) -> None:
+        stamp = repr(float(frame.stamp))
+        name = f"{stamp}.png"
+        # depth the format cannot hold (beyond 65535 / 5000 = 13.1 m) is written as none (0)
+        if frame.depth.dtype == np.uint16 and frame.depth_scale == 0.001:  # millimetres: exactly 5 units each
+            units = frame.depth.astype(np.uint32) * 5
+        else:
+            units = np.round(frame.depth_m().astype(np.float64) * TUM_DEPTH_FACTOR)
+        units = np.where(units <= 65535, units, 0).astype(np.uint16)
+        cv2.imwrite(str(self.out / "depth" / name), units)
+        self.lines["depth"].append(f"{stamp} depth/{name}")
+        if frame.color is not None:
+            cv2.imwrite(str(self.out / "rgb" / name), cv2.cvtColor(frame.color, cv2.COLOR_RGB2BGR))
+            self.lines["rgb"].append(f"{stamp} rgb/{name}")
+        for key, T in (("odometry", frame.T_world_camera), ("groundtruth", T_true)):
+            if T is not None:
+                T = np.asarray(T, float)
+                q = matrix_to_quaternion(T[:3, :3])
+                self.lines[key].append(stamp + " " + " ".join(repr(float(x)) for x in (*T[:3, 3], *q)))
+
+    def close(self) -> None:
+        heads = {"rgb": "# color images\n# timestamp filename\n", "depth": "# depth images\n# timestamp filename\n",
+                 "groundtruth": "# true camera poses\n# timestamp tx ty tz qx qy qz qw\n",
+                 "odometry": "# camera poses the frames carry (odometry)\n# timestamp tx ty tz qx qy qz qw\n"}
+        for key, lines in self.lines.items():
+            if lines or key in ("rgb", "depth"):
+                (self.out / f"{key}.txt").write_text(heads[key] + "".join(line + "\n" for line in lines))
+        K = self.K
+        (self.out / "intrinsics.json").write_text(json.dumps(
+            {"width": K.width, "height": K.height, "fx": K.fx, "fy": K.fy, "cx": K.cx, "cy": K.cy,
+             "depth_factor": TUM_DEPTH_FACTOR}, indent=1))
