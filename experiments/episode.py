@@ -25,9 +25,9 @@ from experiments.episode_log import EpisodeLog, r4
 from experiments.episode_metrics import summarize
 from experiments.perception_modes import PerceptionModule, bearing_and_distance, horizontal_view, make_perception
 from planner.fallback import brake_and_hold
-from planner.mpc import MPCConfig
-from planner.navigator import MPCPlanner, NavigatorConfig
+from planner.safe_planner import SafePlanner, SafePlannerConfig
 from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
+from planner.visibility import SeenSpace
 from planner.voxel_map import MapConfig, VoxelMap
 from sim import World, load_scenario
 from sim.controller import Reference
@@ -64,6 +64,9 @@ class EpisodeConfig:
     # planned on (results bit-identical to rendering in one process with the same latency)
     frame_latency: int = 1
     render_process: bool = True
+    seen_band: tuple[float, float] = (0.8, 1.6)  # m, world z: a ray crossing a floor cell at these heights saw
+    # nobody there (planner.visibility.SeenSpace; a person's torso)
+    launch_radius: float = 2.0  # m around the start that counts as seen free when the episode begins
 
 
 def map_config_for(scenario, robot_radius: float) -> MapConfig:
@@ -76,9 +79,9 @@ def map_config_for(scenario, robot_radius: float) -> MapConfig:
                      robot_size=(2 * robot_radius, 2 * robot_radius, 0.3))
 
 
-def default_planner(robot_radius: float) -> MPCPlanner:
-    """The A* + MPC planner sized for the drone (its collision box's horizontal circumscribed radius)."""
-    return MPCPlanner(NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius)))
+def default_planner(robot_radius: float) -> SafePlanner:
+    """The passively safe planner sized for the drone (its collision box's horizontal circumscribed radius)."""
+    return SafePlanner(SafePlannerConfig(drone_radius=robot_radius))
 
 
 def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePrediction, ...]:
@@ -186,6 +189,11 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     known_map = cfg.static_map == "truth"
     if known_map:
         vmap.set_known(static_occupancy(sc, vmap.origin, vmap.dims, vmap.res))
+    cells = vmap.cell_to_world(np.argwhere(np.ones(tuple(vmap.dims[:2]), bool))).reshape(tuple(vmap.dims[:2]) + (2,))
+    inside = (cells[..., 0] > 0) & (cells[..., 0] < sc.corridor.length) & (np.abs(cells[..., 1]) < sc.corridor.width / 2)
+    seen = SeenSpace(vmap.xy_origin, tuple(vmap.dims[:2]), vmap.res, walkable=inside, band=cfg.seen_band)
+    seen.reset(start_xy=np.asarray(sc.drone.start[:2], float), radius=cfg.launch_radius, stamp=0.0)
+    seen_blocked = vmap.column_blocked(*cfg.seen_band, inflate=False) if known_map else None
     if hasattr(perc, "structure_test"):  # DODT's moving-track rule checks boxes against the static map
         perc.structure_test = vmap.established_fraction
     goal = np.asarray(sc.drone.goal, dtype=float)
@@ -234,7 +242,12 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                 depth_m, _ = frame.depth_m_counted()
                 m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera, dynamic_boxes=po.clear_boxes,
                                 stamp=frame.stamp)
+                seen.observe_depth(depth_m, frame.intrinsics, frame.T_world_camera, frame.stamp,
+                                   structure=vmap.column_blocked(*cfg.seen_band, inflate=False))
                 map_ms = m.get("ms")
+            elif known_map and n_frames % cfg.map_every == 0:
+                seen.observe_map(seen_blocked, frame.intrinsics, frame.T_world_camera, frame.stamp,
+                                 occluders=[(o.center, o.size) for o in po.obstacles])
             n_frames += 1
             q = truth.T_world_body  # the drone at the frame's capture, as its truth and tracks
             people = [o for o in truth.obstacles if o.kind == "person"]
@@ -266,7 +279,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
             inp = PlannerInput(stamp=t, position=st.position.copy(), velocity=st.velocity.copy(),
                                acceleration=accel_cmd.copy(), goal=goal,
                                obstacles=_extrapolate(obstacles, obstacles_stamp, t), occupancy=vmap,
-                               yaw=st.yaw, geofence=geofence)
+                               yaw=st.yaw, geofence=geofence, seen=seen)
             try:
                 traj = planner.plan(inp)
                 if not _finite_trajectory(traj):
