@@ -25,7 +25,9 @@ from experiments.episode_log import EpisodeLog, r4
 from experiments.episode_metrics import summarize
 from experiments.perception_modes import PerceptionModule, bearing_and_distance, horizontal_view, make_perception
 from planner.fallback import brake_and_hold
-from planner.safe_planner import SafePlanner, SafePlannerConfig
+from planner.mpc import MPCConfig
+from planner.navigator import MPCPlanner, NavigatorConfig
+from planner.shield import PassiveSafetyShield, ShieldConfig
 from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
 from planner.visibility import SeenSpace
 from planner.voxel_map import MapConfig, VoxelMap
@@ -79,9 +81,11 @@ def map_config_for(scenario, robot_radius: float) -> MapConfig:
                      robot_size=(2 * robot_radius, 2 * robot_radius, 0.3))
 
 
-def default_planner(robot_radius: float) -> SafePlanner:
-    """The passively safe planner sized for the drone (its collision box's horizontal circumscribed radius)."""
-    return SafePlanner(SafePlannerConfig(drone_radius=robot_radius))
+def default_planner(robot_radius: float) -> PassiveSafetyShield:
+    """The maneuver + MPC planner behind the passive-safety shield, sized for the drone (its collision box's
+    horizontal circumscribed radius)."""
+    return PassiveSafetyShield(MPCPlanner(NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius))),
+                               ShieldConfig(drone_radius=robot_radius))
 
 
 def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePrediction, ...]:
@@ -242,8 +246,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
                 depth_m, _ = frame.depth_m_counted()
                 m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera, dynamic_boxes=po.clear_boxes,
                                 stamp=frame.stamp)
-                seen.observe_depth(depth_m, frame.intrinsics, frame.T_world_camera, frame.stamp,
-                                   structure=vmap.column_blocked(*cfg.seen_band, inflate=False))
+                seen.observe_depth(depth_m, frame.intrinsics, frame.T_world_camera, frame.stamp)
                 map_ms = m.get("ms")
             elif known_map and n_frames % cfg.map_every == 0:
                 seen.observe_map(seen_blocked, frame.intrinsics, frame.T_world_camera, frame.stamp,

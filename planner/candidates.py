@@ -1,9 +1,8 @@
-"""Candidate motions that end at rest: reach a target velocity, hold it for a commit time, then brake.
+"""Motions that end at rest: a target velocity (or a given motion) held for a commit time, then a stop.
 
-Every candidate is sampled on the planner's 0.1 s grid with piecewise-constant accelerations, as the
+Every motion is sampled on the planner's 0.1 s grid with piecewise-constant accelerations, as the
 closed loop flies them (planner.types.Trajectory): each step takes the acceleration that reaches the
-step's target velocity, its norm at most ``a_max`` (``a_brake`` once braking), so a candidate is
-exactly what the controller is given.
+step's target velocity, its norm at most ``a_max`` (``a_brake`` once braking).
 """
 from __future__ import annotations
 
@@ -38,31 +37,6 @@ def _roll(p0, v0, targets, commit, N, dt, a_max, a_brake):
                 vx = vy = 0.0
             A[c, k, 0], A[c, k, 1] = ax, ay
             P[c, k + 1, 0], P[c, k + 1, 1], V[c, k + 1, 0], V[c, k + 1, 1] = px, py, vx, vy
-    return P, V, A
-
-
-@njit(cache=True, nogil=True)
-def _approach(p0, v0, q, N, dt, a_max, v_cap, a_dec):
-    """One candidate that flies straight to q and stops there: each step's target velocity points at q at
-    min(v_cap, sqrt(2 a_dec d), d / dt) for the distance d left."""
-    P, V, A = np.empty((1, N + 1, 2)), np.empty((1, N + 1, 2)), np.empty((1, N, 2))
-    px, py, vx, vy = p0[0], p0[1], v0[0], v0[1]
-    P[0, 0, 0], P[0, 0, 1], V[0, 0, 0], V[0, 0, 1] = px, py, vx, vy
-    for k in range(N):
-        dx, dy = q[0] - px, q[1] - py
-        d = math.sqrt(dx * dx + dy * dy)
-        sp = min(v_cap, math.sqrt(2.0 * a_dec * d), d / dt)
-        tx, ty = (dx / d * sp, dy / d * sp) if d > 1e-9 else (0.0, 0.0)
-        ax, ay = (tx - vx) / dt, (ty - vy) / dt
-        n = math.sqrt(ax * ax + ay * ay)
-        if n > a_max:
-            ax, ay = ax * a_max / n, ay * a_max / n
-        px += vx * dt + 0.5 * ax * dt * dt
-        py += vy * dt + 0.5 * ay * dt * dt
-        vx += ax * dt
-        vy += ay * dt
-        A[0, k, 0], A[0, k, 1] = ax, ay
-        P[0, k + 1, 0], P[0, k + 1, 1], V[0, k + 1, 0], V[0, k + 1, 1] = px, py, vx, vy
     return P, V, A
 
 
@@ -101,14 +75,6 @@ def roll(p0, v0, targets: np.ndarray, commit_time: float, dt: float, a_max: floa
     v0 = np.asarray(v0, dtype=float)[:2].copy()
     P, V, A = _roll(p0, v0, np.ascontiguousarray(targets, dtype=float), commit, N, dt, a_max, a_brake)
     return Candidates(P, V, A, targets, commit)
-
-
-def approach(p0, v0, q, dt: float, a_max: float, a_brake: float, v_cap: float, seconds: float) -> Candidates:
-    """Flying straight to q and stopping there, for ``seconds``."""
-    N = int(math.ceil(seconds / dt))
-    P, V, A = _approach(np.asarray(p0, float)[:2].copy(), np.asarray(v0, float)[:2].copy(),
-                        np.asarray(q, float)[:2].copy(), N, dt, a_max, v_cap, a_brake)
-    return Candidates(P, V, A, np.zeros((1, 2)), np.array([N], dtype=np.int64))
 
 
 @njit(cache=True, nogil=True)
