@@ -151,9 +151,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     known_map = cfg.static_map == "truth"
     if known_map:
         vmap.set_known(static_occupancy(sc, vmap.origin, vmap.dims, vmap.res))
-    cells = vmap.cell_to_world(np.argwhere(np.ones(tuple(vmap.dims[:2]), bool))).reshape(tuple(vmap.dims[:2]) + (2,))
-    inside = (cells[..., 0] > 0) & (cells[..., 0] < sc.corridor.length) & (np.abs(cells[..., 1]) < sc.corridor.width / 2)
-    seen = SeenSpace(vmap.xy_origin, tuple(vmap.dims[:2]), vmap.res, walkable=inside, band=cfg.seen_band)
+    seen = SeenSpace(vmap.xy_origin, tuple(vmap.dims[:2]), vmap.res, band=cfg.seen_band)
     seen.reset(start_xy=np.asarray(sc.drone.start[:2], float), radius=cfg.launch_radius, stamp=0.0)
     seen_blocked = vmap.column_blocked(*cfg.seen_band, inflate=False) if known_map else None
     if hasattr(perc, "structure_test"):  # DODT's moving-track rule checks boxes against the static map

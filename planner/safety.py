@@ -8,10 +8,6 @@ when at every later sample, the stop included:
   t after now a person is inside the disc of centre c + v t and radius r0 + g t + a_p t^2 / 2 and inside
   the disc of centre c and radius r0 + g t + v_p t (r0 from the body and the position error, g from the
   velocity error, a_p a person's acceleration, v_p their top speed);
-- it is at rest, or moving where the camera looks, or no nearer to the unseen space it flies toward
-  (within ``hidden_half_angle`` of its motion) than the contact distance plus ``hidden_speed`` t: it
-  does not fly where the camera does not look faster than it could stop before someone walking from
-  unseen space could be in its way.
 "Moving away": the threat lies more than the away angle (120 deg) off the drone's motion, the fault
 rule's "hit from behind" (experiments.fault). Times are shifted by ``lag``: the controller follows the
 plan late by about that much.
@@ -35,39 +31,12 @@ def _field(F, ox, oy, res, x, y, outside):
 
 
 @njit(cache=True, nogil=True)
-def _hidden_ahead(mask, ox, oy, res, x, y, ux, uy, reach, half_angle, n_rays):
-    """Distance (m) from (x, y) to the first unseen cell (mask) along rays fanned over +-half_angle around
-    the direction (ux, uy), looked for up to ``reach``; reach when there is none."""
-    base = math.atan2(uy, ux)
-    best = reach
-    for r in range(n_rays):
-        a = base - half_angle + 2.0 * half_angle * r / (n_rays - 1)
-        ca, sa = math.cos(a), math.sin(a)
-        d = 0.5 * res
-        while d < best:
-            i = int(math.floor((x + ca * d - ox) / res))
-            j = int(math.floor((y + sa * d - oy) / res))
-            if i < 0 or j < 0 or i >= mask.shape[0] or j >= mask.shape[1]:
-                break
-            if mask[i, j]:
-                best = d
-                break
-            d += 0.5 * res
-    return best
-
-
-@njit(cache=True, nogil=True)
-def check(P, V, dt, clear, hidden, hidden_dist, ox, oy, res, C0, Vp, R0, G, a_p, v_p, need_static, r_contact,
-          hidden_contact, hidden_speed, hidden_half_angle, at_rest, cos_away, lag, view_x, view_y, cos_view):
+def check(P, V, dt, clear, ox, oy, res, C0, Vp, R0, G, a_p, v_p, need_static, r_contact, at_rest, cos_away, lag):
     """Check motions P, V (C, N+1, 2) sampled every dt (module docstring).
 
-    clear: (nx, ny) m to static structure; hidden: (nx, ny) bool, the unseen cells, and hidden_dist the
-    distance (m) from each cell to the nearest of them (to skip the search where none is near). People
-    (M): centres C0 (M, 2), velocities Vp (M, 2), disc radius now R0 (M,) and its growth G (M,) m/s.
-    need_static: the least static clearance; r_contact: the drone's radius (a person's disc includes the
-    body); hidden_contact: the drone's radius plus a person's. (view_x, view_y): the camera's horizontal
-    heading (unit); unseen space counts only for motion more than acos(cos_view) off it: where the camera
-    looks, it sees what comes. The first sample is not checked.
+    clear: (nx, ny) m to static structure. People (M): centres C0 (M, 2), velocities Vp (M, 2), disc
+    radius now R0 (M,) and its growth G (M,) m/s. need_static: the least static clearance; r_contact:
+    the drone's radius (a person's disc includes the body). The first sample is not checked.
 
     Returns safe (C,) bool and violation (C,) m: the deepest intrusion of a sample that is not exempt."""
     C, K = P.shape[0], P.shape[1]
@@ -95,12 +64,6 @@ def check(P, V, dt, clear, hidden, hidden_dist, ox, oy, res, C0, Vp, R0, G, a_p,
                 d0 = math.sqrt((C0[m, 0] - x) ** 2 + (C0[m, 1] - y) ** 2)
                 gap = max(gap, d0 - (R0[m] + G[m] * t + v_p * t) - r_contact)
                 if gap < 0.0 and not (ux * dx + uy * dy < cos_away * speed * d):
-                    worst = max(worst, -gap)
-            need = hidden_contact + hidden_speed * t
-            in_view = ux * view_x + uy * view_y >= cos_view * speed  # the camera looks where it goes
-            if not in_view and _field(hidden_dist, ox, oy, res, x, y, 0.0) < need:
-                gap = _hidden_ahead(hidden, ox, oy, res, x, y, ux, uy, need, hidden_half_angle, 7) - need
-                if gap < 0.0:
                     worst = max(worst, -gap)
         violation[c] = worst
         safe[c] = worst <= 0.0

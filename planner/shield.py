@@ -5,8 +5,7 @@ and checks every plan it makes before the drone flies it. What the drone commits
 for ``commit_time`` and then a stop: replanned every 0.1 s, the commitment is extended as long as it
 stays safe, and if a replan fails the stop is what is left (FASTER's back-up trajectory). The check
 (planner.safety): the commitment keeps clear of static structure, of every place a tracked or
-remembered person could get to, and of unseen space the drone flies toward, unless the drone is at
-rest or moving away from the threat. When the plan's commitment is not safe, the shield flies the
+remembered person could get to, unless the drone is at rest or moving away from the threat. When the plan's commitment is not safe, the shield flies the
 safe motion (a target velocity, then a stop) nearest to what the planner wanted; when none is safe,
 the last safe commitment from now on; when that no longer is, the least unsafe motion.
 
@@ -32,7 +31,7 @@ from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 class ShieldConfig:
     dt: float = 0.1  # s, the commitment's step
     commit_time: float = 0.2  # s a plan is followed before the committed stop begins
-    a_brake: float = 2.5  # m/s^2, the stop
+    a_brake: float = 3.5  # m/s^2, the stop
     a_emergency: float = 5.0  # m/s^2, the stop when nothing is safe (the controller tilts up to 35 deg: 6.9)
     a_max: float = 2.5  # m/s^2, the alternatives' speeding up and turning
     v_max: float = 2.0  # m/s
@@ -40,17 +39,14 @@ class ShieldConfig:
     directions: int = 24  # ... in this many directions
     drone_radius: float = 0.43  # m: the collision box's horizontal circumradius (sim vehicle 0.51 x 0.70 m)
     static_margin: float = 0.1  # m kept from structure beyond the radius
-    person_margin: float = 0.1  # m added to every person's disc
+    person_margin: float = 0.0  # m added to every person's disc
     person_body: float = 0.3  # m: an unseen person's radius
-    person_accel: float = 1.0  # m/s^2 a person may change velocity by (a walker's speeding up and slowing)
+    person_accel: float = 0.0  # m/s^2 a person may change velocity by (a walker's speeding up and slowing)
     person_speed: float = 1.6  # m/s a person walks at most
-    sigmas: float = 2.0  # position and velocity errors covered by the discs, in standard deviations
+    sigmas: float = 1.0  # position and velocity errors covered by the discs, in standard deviations
     at_rest: float = 0.05  # m/s: a plan this slow is at rest (the fault rule's 0.1, less the hover's drift)
     away_angle: float = math.radians(120.0)  # a threat this far off the motion is left behind
-    lag: float = 0.15  # s the drone follows its plan late by
-    unseen_after: float = 3.0  # s: a cell not seen free for this long may hold a person
-    hidden_half_angle: float = math.radians(30.0)  # unseen space within this of the motion is flown toward
-    view_half_angle: float = math.radians(35.0)  # the camera's 43.5 deg less a margin: motion within it is seen
+    lag: float = 0.1  # s the drone follows its plan late by
     memory: float = 2.0  # s a moving obstacle no longer reported is remembered
     memory_min_age: float = 0.5  # s: only obstacles reported this long are remembered
     memory_merge: float = 1.0  # m: an obstacle reported this near a remembered one is that one again
@@ -157,13 +153,6 @@ class PassiveSafetyShield:
         return [centre[0], centre[1], v[0], v[1], r0 + g * age + 0.5 * c.person_accel * age * age,
                 g + c.person_accel * age]
 
-    def _hidden(self, inp: PlannerInput, fields: dict):
-        seen, shape = inp.seen, fields["clear"].shape
-        if seen is None or seen.shape != shape:
-            return np.zeros(shape, np.bool_), np.full(shape, np.inf)
-        mask = seen.unseen(inp.stamp, self.cfg.unseen_after, fields["solid"])
-        return np.ascontiguousarray(mask), (distance_to(mask, seen.res) if mask.any() else np.full(shape, np.inf))
-
     # ------------------------------------------------------------------ planning
 
     def plan(self, inp: PlannerInput) -> Trajectory:
@@ -188,20 +177,15 @@ class PassiveSafetyShield:
             return self.planner.plan(inp)
         fields = self._clearance(inp)
         C0, Vp, R0, G = self._people(inp)
-        hidden, hidden_dist = self._hidden(inp, fields)
         o, res = fields["origin"], fields["res"]
         p0, v0 = np.asarray(inp.position, float), np.asarray(inp.velocity, float)
         i, j = np.clip(np.floor((p0[:2] - o) / res).astype(int), 0, np.array(fields["clear"].shape) - 1)
         need = min(c.drone_radius + c.static_margin, float(fields["clear"][i, j]) - 0.05)  # inside: no closer
 
-        yaw = float(inp.yaw) if inp.yaw is not None and np.isfinite(inp.yaw) else 0.0
-
         def checked(motion: Candidates):
-            return check(motion.P, motion.V, c.dt, fields["clear"], hidden, hidden_dist, o[0], o[1], res, C0, Vp,
-                         R0, G, c.person_accel, c.person_speed, need, c.drone_radius,
-                         c.drone_radius + c.person_body + c.person_margin, c.person_speed, c.hidden_half_angle,
-                         c.at_rest, math.cos(c.away_angle), c.lag, math.cos(yaw), math.sin(yaw),
-                         math.cos(c.view_half_angle))
+            return check(motion.P, motion.V, c.dt, fields["clear"], o[0], o[1], res, C0, Vp, R0, G,
+                         c.person_accel, c.person_speed, need, c.drone_radius, c.at_rest, math.cos(c.away_angle),
+                         c.lag)
 
         nominal = self.planner.plan(inp)
         planned = self._sampled(nominal, inp, p0, v0)

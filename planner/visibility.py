@@ -2,10 +2,9 @@
 
 A grid over the floor (the voxel map's columns) holds, per cell, the last time the camera saw through
 it at a person's height (``band``, world z) and found nobody: a ray of a depth frame crossed the cell
-before reaching what it hit. A walkable cell not seen free for ``unseen_after`` seconds may hold a
-person nobody has seen (planner.shield keeps the drone from flying toward such space faster than it
-could stop before someone walking from there at 1.6 m/s could be in its way). At the start, the place
-the drone starts from counts as seen free within ``reset``'s radius.
+before reaching what it hit. planner.shield forgets a person it no longer gets reports of once the
+camera has seen that person's predicted place free. At the start, the place the drone starts from
+counts as seen free within ``reset``'s radius.
 
 Two ways to feed it, one per frame: ``observe_depth`` reads a depth frame (each image column's nearest
 point at person height ends its ray: what is behind it is hidden); ``observe_map`` casts rays across the
@@ -77,16 +76,14 @@ class SeenSpace:
     """Last time each floor cell was seen free at person height (seconds, -inf: never).
 
     origin_xy, shape, resolution: the grid (cell (i, j) covers origin + res * [i, i + 1) x [j, j + 1)),
-    the voxel map's columns; walkable (nx, ny) bool: where people can be (the corridor's inside). band:
-    the heights (world z, m) a ray must cross a cell at to count (a person's torso). max_range: how far
+    the voxel map's columns. band: the heights (world z, m) a ray must cross a cell at to count (a person's torso). max_range: how far
     the depth is trusted (m). short: a ray stops this much before what it hit."""
 
-    def __init__(self, origin_xy, shape, resolution: float, walkable: np.ndarray | None = None,
-                 band=(0.8, 1.6), max_range: float = 5.0, short: float = 0.15, pixel_step: int = 4):
+    def __init__(self, origin_xy, shape, resolution: float, band=(0.8, 1.6), max_range: float = 5.0,
+                 short: float = 0.15, pixel_step: int = 4):
         self.origin = np.asarray(origin_xy, dtype=float)[:2].copy()
         self.shape = (int(shape[0]), int(shape[1]))
         self.res = float(resolution)
-        self.walkable = np.ones(self.shape, bool) if walkable is None else np.asarray(walkable, bool).copy()
         self.band = (float(band[0]), float(band[1]))
         self.max_range, self.short, self.pixel_step = float(max_range), float(short), int(pixel_step)
         self.last = np.full(self.shape, -np.inf)
@@ -156,8 +153,3 @@ class SeenSpace:
         _mark_rays(self.last, self.origin[0], self.origin[1], self.res, float(T[0, 3]), float(T[1, 3]), ends,
                    float(stamp))
         return len(ends)
-
-    def unseen(self, now: float, unseen_after: float, structure: np.ndarray | None = None) -> np.ndarray:
-        """(nx, ny) bool: walkable cells (not ``structure``) not seen free for more than ``unseen_after`` s."""
-        out = ((now - self.last) > unseen_after) & self.walkable
-        return out & ~structure if structure is not None else out
