@@ -27,7 +27,7 @@ from functools import lru_cache
 from importlib import metadata
 
 # the packages whose arithmetic reaches an episode's outcome
-PACKAGES = ("numpy", "scipy", "numba", "llvmlite", "osqp", "casadi", "pybullet", "onnxruntime",
+PACKAGES = ("numpy", "scipy", "numba", "llvmlite", "osqp", "pybullet", "onnxruntime",
             "opencv-python-headless")
 
 # the x86 SIMD levels between which NumPy's run-time dispatch chooses different kernels

@@ -22,11 +22,13 @@ import numpy as np
 from dodt.geometry import wrap_angle
 from experiments.environment import environment
 from experiments.episode_log import EpisodeLog, r4
-from experiments.perception_modes import PerceptionModule, bearing_and_distance, horizontal_view, make_perception
+from experiments.perception_modes import PerceptionModule, make_perception
 from planner.fallback import brake_and_hold
 from planner.mpc import MPCConfig
 from planner.navigator import MPCPlanner, NavigatorConfig
+from planner.shield import PassiveSafetyShield, ShieldConfig
 from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
+from planner.visibility import SeenSpace
 from planner.voxel_map import MapConfig, VoxelMap
 from sim import World, load_scenario
 from sim.controller import Reference
@@ -45,13 +47,6 @@ class EpisodeConfig:
     map_every: int = 2  # camera frames per map update: 15 Hz at 30 Hz (reference map timer: 20 Hz)
     max_yaw_rate: float = 1.2  # rad/s, heading changes toward the planner's yaw
     map_snapshot_period: float = 1.0  # s between occupied-voxel snapshots in the log
-    # s: a moving obstacle perception stops reporting while it is out of the camera's view is still given to
-    # the planner this long (0 = off), as a disc around where it was last reported that grows at
-    # memory_reach_speed (ObstacleMemory). Off: with memory = 3 s, corridor seeds 0-39 gave dodt 16/40
-    # successes against 23/40 without and oracle 35/40 against 36/40 (a remembered disc that grows at a
-    # walker's speed soon blocks the corridor's 4 m width, and the drone stops or detours)
-    memory: float = 0.0
-    memory_reach_speed: float = 1.0  # m/s: a walker's speed (the corridor's people walk at 0.8 and 1.0 m/s)
     duration: float | None = None  # s; None: the scenario's duration
     # "depth": the static map is built from the camera's depth frames (the paper's setup); "truth": it holds
     # the scenario's static geometry from the start and depth is not used (sim.static_grid), which isolates
@@ -64,6 +59,9 @@ class EpisodeConfig:
     # planned on (results bit-identical to rendering in one process with the same latency)
     frame_latency: int = 1
     render_process: bool = True
+    seen_band: tuple[float, float] = (0.8, 1.6)  # m, world z: a ray crossing a floor cell at these heights saw
+    # nobody there (planner.visibility.SeenSpace; a person's torso)
+    launch_radius: float = 2.0  # m around the start that counts as seen free when the episode begins
 
 
 def map_config_for(scenario, robot_radius: float) -> MapConfig:
@@ -76,9 +74,11 @@ def map_config_for(scenario, robot_radius: float) -> MapConfig:
                      robot_size=(2 * robot_radius, 2 * robot_radius, 0.3))
 
 
-def default_planner(robot_radius: float) -> MPCPlanner:
-    """The A* + MPC planner sized for the drone (its collision box's horizontal circumscribed radius)."""
-    return MPCPlanner(NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius)))
+def default_planner(robot_radius: float) -> PassiveSafetyShield:
+    """The maneuver + MPC planner behind the passive-safety shield, sized for the drone (its collision box's
+    horizontal circumscribed radius)."""
+    return PassiveSafetyShield(MPCPlanner(NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius))),
+                               ShieldConfig(drone_radius=robot_radius))
 
 
 def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePrediction, ...]:
@@ -91,41 +91,6 @@ def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePredictio
         v = o.velocity + o.acceleration * min(lag, o.accel_horizon)
         out.append(replace(o, center=c, velocity=v, position_std=float(o.std_at(np.array([lag]))[0])))
     return tuple(out)
-
-
-class ObstacleMemory:
-    """Moving obstacles that left the camera's view: perception drops them (DODT after its coasting time,
-    the oracle after its memory), yet they are still there, usually beside or behind the drone. Each id
-    last reported is kept for ``memory`` seconds as a standing obstacle where it was last reported whose
-    position uncertainty grows at ``reach_speed``: a person out of view for a while, who may have turned
-    at any moment, is somewhere within walking reach of that place (a constant-velocity extrapolation
-    sends it where it was heading, which a turn makes wrong). It is forgotten once that place is in the
-    camera's view within 4.5 m and nothing is reported there."""
-
-    def __init__(self, memory: float, reach_speed: float):
-        self.memory, self.reach_speed = memory, reach_speed
-        self.last: dict[int, tuple[ObstaclePrediction, float]] = {}
-
-    def update(self, obstacles, stamp: float) -> None:
-        for o in obstacles:
-            self.last[o.id] = (o, stamp)
-
-    def extra(self, current_ids: set, now: float, T_world_camera, intrinsics) -> list[ObstaclePrediction]:
-        """The remembered obstacles not reported now, as predictions at ``now``."""
-        out = []
-        cam, heading, half_fov = horizontal_view(T_world_camera, intrinsics)
-        for oid, (o, stamp) in list(self.last.items()):
-            if oid in current_ids:
-                continue
-            age = now - stamp
-            bearing, dist = bearing_and_distance(cam, heading, o.center)
-            if age > self.memory or (bearing <= half_fov and dist < 4.5):
-                del self.last[oid]  # too old, or its place is in view and empty
-                continue
-            out.append(replace(o, velocity=np.zeros(3), acceleration=np.zeros(3),
-                               position_std=float(o.position_std) + self.reach_speed * age,
-                               std_growth=self.reach_speed))
-        return out
 
 
 def _finite_trajectory(traj) -> bool:
@@ -192,6 +157,9 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     known_map = cfg.static_map == "truth"
     if known_map:
         vmap.set_known(static_occupancy(sc, vmap.origin, vmap.dims, vmap.res))
+    seen = SeenSpace(vmap.xy_origin, tuple(vmap.dims[:2]), vmap.res, band=cfg.seen_band)
+    seen.reset(start_xy=np.asarray(sc.drone.start[:2], float), radius=cfg.launch_radius, stamp=0.0)
+    seen_blocked = vmap.column_blocked(*cfg.seen_band, inflate=False) if known_map else None
     if hasattr(perc, "structure_test"):  # DODT's moving-track rule checks boxes against the static map
         perc.structure_test = vmap.established_fraction
     goal = np.asarray(sc.drone.goal, dtype=float)
@@ -212,7 +180,6 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     co = sc.corridor  # its walls are known: the planner keeps inside them (the map sees them only at a glance)
     geofence = (np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2]))
     obstacles, obstacles_stamp = (), 0.0
-    memory = ObstacleMemory(cfg.memory, cfg.memory_reach_speed) if cfg.memory > 0 else None
     traj: Trajectory | None = None
     yaw = float(sc.drone.yaw)
     accel_cmd = np.zeros(3)
@@ -230,17 +197,16 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
             perc_ms = (time.perf_counter() - t0) * 1e3
             if po.skipped is None:
                 obstacles, obstacles_stamp = po.obstacles, po.stamp
-                if memory is not None:
-                    memory.update(po.obstacles, po.stamp)
-                    ids = {o.id for o in po.obstacles}
-                    obstacles = tuple(obstacles) + tuple(memory.extra(ids, po.stamp, frame.T_world_camera,
-                                                                      frame.intrinsics))
             map_ms = None
             if not known_map and n_frames % cfg.map_every == 0:
                 depth_m, _ = frame.depth_m_counted()
                 m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera, dynamic_boxes=po.clear_boxes,
                                 stamp=frame.stamp)
+                seen.observe_depth(depth_m, frame.intrinsics, frame.T_world_camera, frame.stamp)
                 map_ms = m.get("ms")
+            elif known_map and n_frames % cfg.map_every == 0:
+                seen.observe_map(seen_blocked, frame.intrinsics, frame.T_world_camera, frame.stamp,
+                                 occluders=[(o.center, o.size) for o in po.obstacles])
             n_frames += 1
             q = truth.T_world_body  # the drone at the frame's capture, as its truth and tracks
             people = [o for o in truth.obstacles if o.kind == "person"]
@@ -272,7 +238,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
             inp = PlannerInput(stamp=t, position=st.position.copy(), velocity=st.velocity.copy(),
                                acceleration=accel_cmd.copy(), goal=goal,
                                obstacles=_extrapolate(obstacles, obstacles_stamp, t), occupancy=vmap,
-                               yaw=st.yaw, geofence=geofence)
+                               yaw=st.yaw, geofence=geofence, seen=seen)
             try:
                 traj = planner.plan(inp)
                 if not _finite_trajectory(traj):

@@ -109,11 +109,6 @@ class MovingTrackRule:
     # logs of corridor seeds 0-39 (dodt, a snapshot approximation of the map's age): of the frame-tracks
     # this rule passed, 991 of 2118 more than 1 m from every person were such tracks, and 25 of 470 near one
     on_structure: float = 0.2
-    measured: bool = False  # True: only while the track has a detection, not while it coasts. Of the frame-
-    # tracks this rule passed on corridor seeds 0-39 (dodt logs), 1763 of the 2118 more than 1 m from every
-    # person were coasting (a box on a static obstacle whose visible extent grew as the drone came closer,
-    # sailing on at that speed), but so were 258 of the 470 near a person: people beside the drone, out of
-    # view. Off: in closed loop (with the geofence, seeds 0-10) it failed 4 of 11, people out of view again
 
 
 class DODTPerception:
@@ -136,8 +131,6 @@ class DODTPerception:
     def _moving(self, o, frame: SensorFrame | None = None) -> bool:
         m = self.moving_rule
         if m is None or o.age < m.min_age or not self._person_tall(o, frame):
-            return False
-        if m.measured and o.coasting:
             return False
         v = o.velocity if o.filter_velocity is None else o.filter_velocity  # a static track reports none
         speed = float(np.hypot(v[0], v[1]))

@@ -94,9 +94,7 @@ class ManeuverConfig:
 
 @dataclass(frozen=True, eq=False)
 class ViewTerm:
-    """What the camera should keep in view, for scoring candidates by it (view_costs): ``weight`` metres of
-    path per unit of view cost; the rest as view_costs takes them."""
-    weight: float
+    """What the camera should keep in view (view_costs takes these): the heading rule's inputs."""
     headings: np.ndarray  # (H,) rad
     half_view: float  # rad: the camera's half field of view less a margin
     look_step: int  # the motion is p0 to the position at this step...
@@ -394,12 +392,10 @@ class ManeuverSelector:
         return P, V, A
 
     def choose(self, t0: float, p0, v0, guide_dir, obstacles, clear: np.ndarray, goal_field: np.ndarray,
-               origin_xy, resolution: float, goal_xy, view: ViewTerm | None = None) -> Maneuver:
+               origin_xy, resolution: float, goal_xy) -> Maneuver:
         """The best candidate from (p0, v0) at time t0; goal_field: metres to goal_xy per column cell,
-        clear: static clearance per cell (static_clearance), both on the grid at origin_xy, resolution.
-        With ``view``, each candidate also pays view.weight times how badly the best fixed heading keeps its
-        motion and the watched obstacles in the camera's view (view_costs; its part "view")."""
-        cfg, N, dt = self.cfg, self.N, self.dt
+        clear: static clearance per cell (static_clearance), both on the grid at origin_xy, resolution."""
+        cfg, N = self.cfg, self.N
         gi = np.clip(np.floor((np.asarray(goal_xy, float)[:2] - origin_xy) / resolution).astype(int), 0,
                      np.array(clear.shape) - 1)
         c_goal = float(clear[gi[0], gi[1]])  # a goal near a wall: the static thresholds relax around it
@@ -437,11 +433,6 @@ class ManeuverSelector:
                    cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static, cfg.w_near, cfg.worst_case, cfg.w_keep,
                    cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]), cfg.near_goal, r_goal, m_goal, parts)
         names = ["goal", "static", "dynamic", "keep", "effort"]
-        if view is not None and view.weight > 0:
-            vc, _ = view.costs(P, p0)
-            J = J + view.weight * vc
-            parts = np.column_stack([parts, view.weight * vc])
-            names.append("view")
         b = int(np.argmin(J))
         pos, vel = np.vstack([p0, P[b]]), np.vstack([v0, V[b]])
         self._prev = (float(t0), pos, A[b].copy())

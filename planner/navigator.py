@@ -4,13 +4,13 @@ among sampled motions, the MPC refining it.
 Every call: (1) every ``path_period`` seconds, or sooner when the current path runs into newly
 occupied cells, an A* path to the goal on the map's column grid at the flight altitude, and the
 cost-to-go field the maneuvers score against (both cached on the map's version);
-(2) with maneuvers (``NavigatorConfig.maneuvers``, the default): ``planner.maneuvers`` scores
-two-phase candidate motions against the goal, static clearance and several hypotheses of each
-moving obstacle's future, and the chosen one is the MPC's reference and the point its obstacle
-constraints are linearised at; without: a reference sampled along the path at cruise speed;
+(2) ``planner.maneuvers`` scores two-phase candidate motions against the goal, static clearance and
+several hypotheses of each moving obstacle's future, and the chosen one is the MPC's reference and the
+point its obstacle constraints are linearised at (without a map: a reference along the straight line
+to the goal at cruise speed);
 (3) the MPC over the predicted moving obstacles and the occupied voxels near the drone;
 (4) a heading that keeps both where the drone goes and the nearby moving obstacles in the
-camera's view (without maneuvers: toward a point ``look_ahead`` metres further on the path).
+camera's view (without a map: toward a point ``look_ahead`` metres further on the path).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from planner.fallback import brake_and_hold
 from planner.global_path import PathFollower, cost_to_go, grid_path
 from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
 from planner.mpc import MPC, MPCConfig
-from planner.types import ObstaclePrediction, PlannerInput, Trajectory
+from planner.types import PlannerInput, Trajectory
 
 
 @dataclass(frozen=True)
@@ -37,19 +37,9 @@ class NavigatorConfig:
     static_band: float = 0.8  # m; ... and within this height of the goal altitude
     block_times: tuple[float, ...] = (0.0, 0.5, 1.0)  # s; moving obstacles block the path search here
     look_ahead: float = 2.0  # m along the path for the heading
-    max_heading_offset: float = 0.8  # rad; without the FOV constraint the heading stays within this of the
-    # direction to the goal, so a detour does not turn the camera away from where people come from (ours: a
-    # sideways detour at 80 deg left a person approaching from ahead unseen until it hit the drone)
-    # fractions of the cruise speed the reference may slow to (MPCPlanner.reference); (1.0,): no yielding.
-    # Yielding (1, 0.66, 0.33, 0) was measured on corridor seeds 0-23: oracle failures 11 of 24 against 7
-    # of 27 without. Our people do not avoid the drone, so a drone that waits gets walked into; it is off.
-    yield_fractions: tuple[float, ...] = (1.0,)
-    heading_lead_steps: int = 5  # the heading follows the planned velocity this many MPC steps ahead
-    heading_min_speed: float = 0.5  # m/s; slower plans face the path ahead instead
     use_geofence: bool = True  # keep the plan inside PlannerInput.geofence (the corridor's walls) when given
-    # the maneuver layer (planner.maneuvers): picks how to pass moving obstacles and the MPC refines that
-    # motion; None: the MPC follows the path at cruise speed and decides alone (the earlier planner)
-    maneuvers: ManeuverConfig | None = field(default_factory=ManeuverConfig)
+    # the maneuver layer (planner.maneuvers): picks how to pass moving obstacles and the MPC refines that motion
+    maneuvers: ManeuverConfig = field(default_factory=ManeuverConfig)
     guide_look_ahead: float = 1.5  # m along the path: the maneuvers' frame points at this point
     # With maneuvers the heading is chosen to keep in the camera's view both where the drone goes (the chosen
     # maneuver heading_look_time ahead, weighted by its speed) and the moving obstacles that will be within
@@ -69,24 +59,6 @@ class NavigatorConfig:
     # corridor seed 126 (dodt) the drone flew on at 2 m/s with its camera turned 80-90 degrees from its motion,
     # toward him, lost the person ahead of it and flew into her
     watch_times: tuple[float, ...] = (0.5, 1.0)
-    # s: a moving obstacle that stops being reported is remembered this long (0: not at all) on its last
-    # prediction, its position uncertainty growing at ghost_std_growth; the maneuvers avoid it and the heading
-    # watches for it, the MPC's constraints do not hold it. One within ghost_merge of a reported obstacle is
-    # taken to be that obstacle, reported again under another id. Off: on corridor seeds 0-199 (oracle,
-    # --map truth) 2 s gave 192 successes against 190 (3 seeds to success, 1 to failure), but with dodt
-    # 73 against 76 of seeds 0-99 (6 and 9, p = 0.61): within the churn either way (README, Closed loop)
-    ghost_time: float = 0.0
-    ghost_std_growth: float = 0.3  # m/s
-    ghost_merge: float = 1.0  # m
-    ghost_min_age: float = 0.5  # s: only obstacles reported at least this long are remembered
-    ghost_view_range: float = 4.0  # m: a ghost in the camera's view (less fov_margin) this near is forgotten
-    # metres of path per unit of view cost (maneuvers.view_costs: how far, in radians times the heading rule's
-    # weights, the best fixed heading leaves the candidate's motion and the watched obstacles outside the view
-    # less fov_margin): maneuvers are then chosen for what the camera can keep in view as well; 0: off. Off:
-    # 0.3 gave oracle --map truth 192 against 190 of corridor seeds 0-199 (6 to success, 4 to failure; 1.0:
-    # 185, 7 and 12) but dodt 33 against 40 of seeds 0-54 (1 and 8, p = 0.04): a motion toward the people it
-    # watches is the easiest to keep in one view with them
-    view_weight: float = 0.0
     mpc: MPCConfig = field(default_factory=MPCConfig)
 
 
@@ -120,14 +92,13 @@ class MPCPlanner:
         self.cfg = cfg
         self.mpc = MPC(cfg.mpc)
         m = cfg.mpc
-        self.selector = None if cfg.maneuvers is None else ManeuverSelector(
-            cfg.maneuvers, horizon=m.horizon, dt=m.dt, a_max=m.a_max_xy, v_max=m.v_max_xy, robot_radius=m.robot_radius)
+        self.selector = ManeuverSelector(cfg.maneuvers, horizon=m.horizon, dt=m.dt, a_max=m.a_max_xy,
+                                         v_max=m.v_max_xy, robot_radius=m.robot_radius)
         self.reset()
 
     def reset(self) -> None:
         self.mpc.reset()
-        if self.selector is not None:
-            self.selector.reset()
+        self.selector.reset()
         self._fields = None  # (map version, goal, geofence) -> static clearance and cost-to-go grids
         self.last_maneuver = None
         self.follower: PathFollower | None = None
@@ -135,8 +106,6 @@ class MPCPlanner:
         self._goal: np.ndarray | None = None
         self.path_searches = 0
         self.path_failures = 0
-        self._seen: dict[int, tuple[float, float, ObstaclePrediction]] = {}  # id -> (first, last stamp, prediction)
-        self._obstacles: tuple[ObstaclePrediction, ...] = ()  # this call's: reported and remembered
 
     @property
     def path(self) -> np.ndarray | None:
@@ -150,7 +119,7 @@ class MPCPlanner:
         if not obstacles:
             return b
         b = b.copy()
-        m, res = self.cfg.mpc, occupancy.cfg.resolution
+        m = self.cfg.mpc
         nx, ny = b.shape
         times = np.asarray(self.cfg.block_times)
         for o in obstacles:
@@ -216,38 +185,11 @@ class MPCPlanner:
             s_k[k], v_k[k] = s, v
         return s_k, v_k
 
-    def _conflicts(self, s_k: np.ndarray, inp: PlannerInput) -> bool:
-        """Does a reference at arc lengths s_k meet a moving obstacle's prediction (same times)?"""
-        m = self.cfg.mpc
-        if not inp.obstacles:
-            return False
-        pts, _ = self.follower.at(s_k)
-        t = m.dt * np.arange(1, m.horizon + 1)
-        for o in inp.obstacles:
-            r = 0.5 * float(np.hypot(o.size[0], o.size[1])) + m.robot_radius + m.dynamic_margin
-            oc = o.predict(t)[:, :2]
-            if np.any(np.hypot(*(pts - oc).T) < r + o.std_at(t)):
-                return True
-        return False
-
     def reference(self, inp: PlannerInput) -> tuple[np.ndarray, np.ndarray]:
-        """MPC position and velocity references (N, 3) along the path.
-
-        Yielding: the reference runs along the path at the fastest of ``yield_fractions`` x cruise
-        speed whose positions over the horizon keep clear of every moving obstacle's prediction, so
-        the drone waits for a crossing person to pass instead of racing it (the MPC alone would dodge
-        ahead of the person, into where it walks); when none is clear it runs at cruise speed and the
-        MPC's obstacle constraints do the avoiding."""
+        """MPC position and velocity references (N, 3) along the path at cruise speed (without a map)."""
         c, m = self.cfg, self.cfg.mpc
         f = self.follower
-        s0 = f.project(inp.position[:2])
-        cruise = s_k, v_k = self._profile(s0, c.cruise_speed)
-        if tuple(c.yield_fractions) != (1.0,):  # yielding on (the default (1.0,) always gives cruise)
-            for frac in c.yield_fractions:
-                cand = cruise if frac == 1.0 else self._profile(s0, c.cruise_speed * frac)
-                if not self._conflicts(cand[0], inp):
-                    s_k, v_k = cand
-                    break
+        s_k, v_k = self._profile(f.project(inp.position[:2]), c.cruise_speed)
         pts, tang = f.at(s_k)
         p_ref = np.column_stack([pts, np.full(m.horizon, float(inp.goal[2]))])
         v_ref = np.column_stack([tang * v_k[:, None], np.zeros(m.horizon)])
@@ -266,50 +208,14 @@ class MPCPlanner:
             self._fields = (key, clear, goal)
         return self._fields[1], self._fields[2]
 
-    def _with_ghosts(self, inp: PlannerInput) -> tuple[ObstaclePrediction, ...]:
-        """The reported moving obstacles plus those remembered (NavigatorConfig.ghost_time), each where its
-        last prediction puts it now."""
-        c = self.cfg
-        if c.ghost_time <= 0:
-            return tuple(inp.obstacles)
-        for ob in inp.obstacles:
-            first = self._seen[ob.id][0] if ob.id in self._seen else inp.stamp
-            self._seen[ob.id] = (first, inp.stamp, ob)
-        now = {ob.id for ob in inp.obstacles}
-        centers = [np.asarray(ob.center, float)[:2] for ob in inp.obstacles]
-        p = np.asarray(inp.position, float)[:2]
-        ghosts = []
-        for oid, (first, t, ob) in list(self._seen.items()):
-            if oid in now:
-                continue
-            age = inp.stamp - t
-            if age > c.ghost_time or t - first < c.ghost_min_age:
-                del self._seen[oid]
-                continue
-            pos, vel = ob.predict(np.array([age]))[0], ob.cruise_velocity(np.array([age]))[0]
-            d = pos[:2] - p
-            if inp.yaw is not None and np.hypot(*d) < c.ghost_view_range:
-                off = abs((math.atan2(d[1], d[0]) - inp.yaw + math.pi) % (2 * math.pi) - math.pi)
-                if off < c.camera_half_fov - c.fov_margin:  # the camera sees where it would be: not there
-                    del self._seen[oid]
-                    continue
-            if any(np.hypot(*(q - pos[:2])) < c.ghost_merge for q in centers):
-                continue
-            ghosts.append(ObstaclePrediction(id=oid, center=pos, size=np.asarray(ob.size, float), velocity=vel,
-                                             position_std=float(ob.std_at(np.array([age]))[0]) + c.ghost_std_growth * age,
-                                             std_growth=max(ob.std_growth, c.ghost_std_growth),
-                                             accel_horizon=0.0, max_speed=ob.max_speed))
-        return tuple(inp.obstacles) + tuple(ghosts)
-
     def _toward_path_ahead(self, inp: PlannerInput, distance: float) -> np.ndarray:
         """(2,) from the drone to the point ``distance`` metres further along the path than its projection."""
         f = self.follower
         ahead, _ = f.at(np.array([f.project(inp.position[:2]) + distance]))
         return ahead[0] - inp.position[:2]
 
-    def guided_reference(self, inp: PlannerInput, view: ViewTerm | None = None):
-        """(p_ref, v_ref) for the MPC from the maneuver layer (also its guide: the chosen maneuver); with
-        ``view``, the maneuvers are scored on it too (NavigatorConfig.view_weight)."""
+    def guided_reference(self, inp: PlannerInput):
+        """(p_ref, v_ref) for the MPC from the maneuver layer (also its guide: the chosen maneuver)."""
         m = self.cfg.mpc
         d = self._toward_path_ahead(inp, self.cfg.guide_look_ahead)
         if np.hypot(*d) < 0.2:
@@ -317,22 +223,21 @@ class MPCPlanner:
         if np.hypot(*d) < 1e-6:
             d = np.array([1.0, 0.0])
         clear, goal = self._static_fields(inp)
-        man = self.selector.choose(inp.stamp, inp.position, inp.velocity, d, self._obstacles, clear, goal,
-                                   inp.occupancy.xy_origin, inp.occupancy.res, inp.goal[:2], view=view)
+        man = self.selector.choose(inp.stamp, inp.position, inp.velocity, d, inp.obstacles, clear, goal,
+                                   inp.occupancy.xy_origin, inp.occupancy.res, inp.goal[:2])
         self.last_maneuver = man
         z = float(inp.goal[2])
         p_ref = np.column_stack([man.positions[1:], np.full(m.horizon, z)])
         v_ref = np.column_stack([man.velocities[1:], np.zeros(m.horizon)])
         return p_ref, v_ref
 
-    def _view_term(self, path_yaw: float | None) -> ViewTerm:
-        """The heading rule's bearings (config) as a maneuvers.ViewTerm over this call's obstacles, weighted
-        NavigatorConfig.view_weight for the maneuvers."""
+    def _view_term(self, inp: PlannerInput, path_yaw: float | None) -> ViewTerm:
+        """The heading rule's bearings (config) as a maneuvers.ViewTerm over this call's obstacles."""
         c = self.cfg
         steps = lambda t, lo: min(max(int(round(t / c.mpc.dt)), lo), c.mpc.horizon)  # noqa: E731
         times = np.asarray(c.watch_times, float)
-        watch = np.array([ob.predict(times)[:, :2] for ob in self._obstacles], float).reshape(-1, len(times), 2)
-        return ViewTerm(c.view_weight, _HEADINGS, c.camera_half_fov - c.fov_margin, steps(c.heading_look_time, 1),
+        watch = np.array([ob.predict(times)[:, :2] for ob in inp.obstacles], float).reshape(-1, len(times), 2)
+        return ViewTerm(_HEADINGS, c.camera_half_fov - c.fov_margin, steps(c.heading_look_time, 1),
                         c.heading_look_time, math.nan if path_yaw is None else path_yaw, watch,
                         np.array([steps(t, 0) for t in c.watch_times], np.int64), c.watch_range, 0.05)
 
@@ -374,14 +279,12 @@ class MPCPlanner:
             return brake_and_hold(inp.stamp, inp.position, inp.velocity, a_max=a_max, status=f"error:{type(e).__name__}")
 
     def _plan(self, inp: PlannerInput, tic: float) -> Trajectory:
-        self._obstacles = self._with_ghosts(inp)
         self._update_path(inp)
-        guide = view = None
+        guide = None
         d = self._toward_path_ahead(inp, self.cfg.look_ahead)
         yaw = math.atan2(d[1], d[0]) if np.hypot(*d) > 0.3 else None
-        if self.selector is not None and inp.occupancy is not None:
-            view = self._view_term(yaw)  # the maneuvers' view term (when weighted) and the heading's
-            p_ref, v_ref = self.guided_reference(inp, view if self.cfg.view_weight > 0 else None)
+        if inp.occupancy is not None:
+            p_ref, v_ref = self.guided_reference(inp)
             guide = p_ref
         else:
             p_ref, v_ref = self.reference(inp)
@@ -397,19 +300,6 @@ class MPCPlanner:
                              geofence=inp.geofence if self.cfg.use_geofence else None, guide=guide)
         traj = res.trajectory
         if guide is not None:
-            yaw = self._heading(inp, yaw, view)
-        elif self.cfg.mpc.fov_half_angle is not None:
-            # The MPC keeps the motion inside the camera's view: the heading must lead it round, so it
-            # faces the planned motion (the path ahead when slow).
-            k = min(self.cfg.heading_lead_steps, len(traj.velocities) - 1)
-            vp = traj.velocities[k][:2]
-            if np.hypot(*vp) > self.cfg.heading_min_speed:
-                yaw = math.atan2(vp[1], vp[0])
-        else:
-            g = inp.goal[:2] - inp.position[:2]
-            if yaw is not None and np.hypot(*g) > 0.5:
-                to_goal = math.atan2(g[1], g[0])
-                off = (yaw - to_goal + math.pi) % (2 * math.pi) - math.pi
-                yaw = to_goal + float(np.clip(off, -self.cfg.max_heading_offset, self.cfg.max_heading_offset))
+            yaw = self._heading(inp, yaw, self._view_term(inp, yaw))
         return Trajectory(traj.t0, traj.dt, traj.positions, traj.velocities, traj.accelerations,
                           status=traj.status, solve_ms=(time.perf_counter() - tic) * 1e3, yaw=yaw)

@@ -11,10 +11,11 @@ stops at a voxel already crossed this frame (ref), so converging rays are not wa
 leaves about half of the frustum uncarved in a frame (rays of distant pixels diverge after sharing a
 voxel). Boxes of dynamic obstacles free their region (grown by a margin, from the map's floor up) and,
 for a few frames, keep depth points inside it from being inserted: a walker leaves no trail. Ours: a
-voxel occupied for ``static_after`` updates or more is left alone by both rules. The reference frees
-everything in the region, so a person walking past a shelf erases the shelf's near face from the map
-(measured in corridor episodes: 244 shelf voxels down to 4, then a drone flew into the shelf); a
-walker's own voxels are younger than that when its box covers them.
+voxel is left alone by both rules when it has been occupied for ``static_after`` updates, or when it
+was occupied for ``protect_before`` updates already when a dynamic region first came over it (it stays
+so while regions keep covering it). The reference frees everything in the region, so a person walking
+past a shelf or a pillar erases its near face from the map, and then a drone flies into it; a walker's
+own voxels are as young as its box when the box first covers them.
 Voxel (i, j, k) covers origin + res * [i, i + 1) per axis. No result depends on the wall clock.
 """
 from __future__ import annotations
@@ -60,6 +61,8 @@ class MapConfig:
     dynamic_history: int = 6  # frames a freed region keeps blocking insertion, ref histFreeRegions_
     static_after: int = 15  # updates (1 s at the closed loop's 15 Hz) after which an occupied voxel is no
     # longer freed by dynamic regions; ours (module docstring); 0: the reference (always freed)
+    protect_before: int = 3  # updates: a voxel occupied this long when a dynamic region first covers it is
+    # kept (0: never; with static_after 0, the reference)
 
     def __post_init__(self):
         if not self.resolution > 0 or min(self.size) <= 0 or min(self.local_update_range) <= 0:
@@ -67,7 +70,7 @@ class MapConfig:
         if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < 1 or not self.p_min < self.p_occ < self.p_max < 1:
             raise ValueError("MapConfig: need 0 < p_min < p_miss < 0.5 < p_hit < 1 and p_min < p_occ < p_max < 1")
         if self.skip_pixel < 1 or self.margin < 0 or self.dynamic_history < 1 or self.ray_bundle_px < 0 \
-                or self.ray_bundle_px % self.skip_pixel or self.static_after < 0:
+                or self.ray_bundle_px % self.skip_pixel or self.static_after < 0 or self.protect_before < 0:
             raise ValueError("MapConfig: need skip_pixel >= 1, margin >= 0, dynamic_history >= 1, "
                              "static_after >= 0 and ray_bundle_px a non-negative multiple of skip_pixel")
 
@@ -83,9 +86,9 @@ def _in_regions(i, j, k, regions):
 
 @njit(cache=True, nogil=True)
 def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, rmax, res, dims, blo, bhi,
-                regions, stamp, hits, misses, touched, base, L, l_occ, since, update, static_after):
+                regions, stamp, hits, misses, touched, base, protected):
     """Ray-cast one frame, counting hits and misses per voxel (cv: camera in voxel units). A point inside
-    a dynamic region ends a free ray, unless its voxel has been occupied for static_after updates.
+    a dynamic region ends a free ray, unless its voxel is ``protected`` (VoxelMap._protected).
 
     stamp[k] holds the id of the last ray bundle that crossed voxel k; ids grow across frames, so
     stamp[k] >= base means "counted this frame" and stamp[k] == bid "crossed by this bundle", where
@@ -131,8 +134,7 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                     j = min(max(int(math.floor(pv[1])), blo[1]), bhi[1])
                     k = min(max(int(math.floor(pv[2])), blo[2]), bhi[2])
                     idx = i * si + j * sj + k
-                    if not free and _in_regions(i, j, k, regions) \
-                            and not (L[idx] >= l_occ and update - since[idx] >= static_after):
+                    if not free and _in_regions(i, j, k, regions) and not protected[idx]:
                         free = True
                         skipped += 1
                     rays += 1
@@ -191,11 +193,11 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
 
 @njit(cache=True, nogil=True)
 def _apply(L, touched, n, hits, misses, regions, dims, l_hit, l_miss, l_min, l_max, l_occ, since, update,
-           static_after):
+           protected):
     """One log-odds step per touched voxel (ref): a hit if hits >= misses and hits > 0, else a miss; an
     unknown voxel seen free becomes free; clamped to [logit p_min, logit p_max]. Hits are rays ending in
     the voxel, misses ray bundles crossing it. since[idx]: the update in which the voxel last became
-    occupied (ours, for the static_after rule)."""
+    occupied (ours, for the protection rules)."""
     for m in range(n):
         idx = touched[m]
         h, ms = hits[idx], misses[idx]
@@ -206,9 +208,9 @@ def _apply(L, touched, n, hits, misses, regions, dims, l_hit, l_miss, l_min, l_m
         else:
             continue
         was = L[idx] >= l_occ
-        if val >= l_occ and not (was and update - since[idx] >= static_after) \
+        if val >= l_occ and not (was and protected[idx]) \
                 and _in_regions(idx // (dims[1] * dims[2]), (idx // dims[2]) % dims[1], idx % dims[2], regions):
-            val = l_min  # never occupied inside a recent dynamic region (ref), unless long occupied (ours)
+            val = l_min  # never occupied inside a recent dynamic region (ref), unless protected (ours)
         if val >= l_occ and not was:
             since[idx] = update
         L[idx] = val
@@ -247,6 +249,8 @@ class VoxelMap:
         self._hits = np.zeros(self.log_odds.size, np.int16)  # this frame's counts (valid where stamped)
         self._misses = np.zeros(self.log_odds.size, np.int16)
         self._since = np.zeros(self.log_odds.shape, np.int32)  # update in which each voxel became occupied
+        self._covered = np.zeros(self.log_odds.shape, bool)  # under a dynamic region in the last update
+        self._held = np.zeros(self.log_odds.shape, bool)  # occupied protect_before updates when first covered
         self._static_after = cfg.static_after or int(np.iinfo(np.int32).max)  # 0: never protected
         box = np.minimum(self.dims, 2 * np.ceil(np.asarray(cfg.local_update_range) / self.res) + 2)
         self._touched = np.empty(int(np.prod(box)), np.int64)
@@ -260,7 +264,9 @@ class VoxelMap:
         self._next_bundle = 0
         self._history.clear()
         self._since.fill(0)
-        self._updates = 0  # update() calls so far: the clock of the static_after rule
+        self._covered.fill(False)
+        self._held.fill(False)
+        self._updates = 0  # update() calls so far: the clock of the protection rules
         self.version += 1
 
     def set_known(self, occupied: np.ndarray) -> None:
@@ -296,10 +302,17 @@ class VoxelMap:
         self._updates += 1
         self.version += 1
         regions = [self._region(c, s) for c, s in dynamic_boxes]
+        cover = np.zeros(self.log_odds.shape, bool)
         for r in regions:
             if np.all(r[3:] >= r[:3]):
-                box = np.s_[r[0]:r[3] + 1, r[1]:r[4] + 1, r[2]:r[5] + 1]
-                self.log_odds[box][~self._established(box)] = np.float32(self.l_min)
+                cover[r[0]:r[3] + 1, r[1]:r[4] + 1, r[2]:r[5] + 1] = True
+        first = cover & ~self._covered  # regions reaching these voxels now: were they there before?
+        self._held[first] = (self.log_odds[first] >= self.l_occ) & (self.cfg.protect_before > 0) & \
+            (self._updates - self._since[first] >= self.cfg.protect_before)
+        self._held &= cover
+        self._covered = cover
+        protected = self._protected()
+        self.log_odds[cover & ~protected] = np.float32(self.l_min)
         self._history.append(np.array(regions, np.int32).reshape(-1, 6))
         hist = np.concatenate(list(self._history))
         T = np.asarray(T_world_camera, dtype=np.float64)
@@ -322,12 +335,11 @@ class VoxelMap:
                             np.ascontiguousarray(T[:3, :3]), (cam - self.origin) / self.res, c.margin,
                             c.skip_pixel, bundle, c.depth_min, c.depth_max, c.raycast_max, self.res, self.dims,
                             blo, bhi, hist, self._stamp, self._hits, self._misses, self._touched,
-                            self._next_bundle, self.log_odds.reshape(-1), self.l_occ, self._since.reshape(-1),
-                            self._updates, self._static_after)
+                            self._next_bundle, protected.reshape(-1))
             self._next_bundle += int(r[1])
             _apply(self.log_odds.reshape(-1), self._touched, r[0], self._hits, self._misses, hist, self.dims,
                    self.l_hit, self.l_miss, self.l_min, self.l_max, self.l_occ, self._since.reshape(-1),
-                   self._updates, self._static_after)
+                   self._updates, protected.reshape(-1))
             out.update(rays=int(r[2]), hits=int(r[3]), skipped_in_dynamic=int(r[4]), bad_pixels=int(r[5]))
         else:  # a camera outside the map (or a non-finite pose) casts nothing; bad pixels are still counted
             m, sk = self.cfg.margin, self.cfg.skip_pixel
@@ -383,8 +395,14 @@ class VoxelMap:
         return a, b
 
     def _established(self, box) -> np.ndarray:
-        """Bool mask over the slice `box`: voxels occupied for static_after updates or more."""
-        return (self.log_odds[box] >= self.l_occ) & (self._updates - self._since[box] >= self._static_after)
+        """Bool mask over the slice `box`: voxels occupied for static_after updates or more, or held (kept
+        since a dynamic region first came over them)."""
+        return ((self.log_odds[box] >= self.l_occ) & (self._updates - self._since[box] >= self._static_after)) \
+            | self._held[box]
+
+    def _protected(self) -> np.ndarray:
+        """The voxels dynamic regions leave alone: established (module docstring)."""
+        return self._established(np.s_[:, :, :])
 
     def occupied_centers(self, lo, hi) -> np.ndarray:
         """(K, 3) float64 world centres of occupied voxels whose centres lie in the AABB [lo, hi]."""

@@ -66,19 +66,17 @@ def _rule_only(rule):
 
 def test_moving_track_rule_passes_person_like_tracks_at_walking_speed():
     """A person-sized track at walking speed reaches the planner though DODT labels it static (coasting
-    too, unless `measured`); a wall-sized or slow one does not."""
+    too); a wall-sized or slow one does not."""
     from experiments.perception_modes import MovingTrackRule
-    p = _rule_only(MovingTrackRule(measured=False))
+    p = _rule_only(MovingTrackRule())
     assert p._moving(_track(coasting=False)) and p._moving(_track(coasting=True))
     assert not p._moving(_track(coasting=False, speed=0.2))
     assert not p._moving(_track(coasting=False, size=(2.5, 0.3, 1.7)))
-    p = _rule_only(MovingTrackRule(measured=True))
-    assert p._moving(_track(coasting=False)) and not p._moving(_track(coasting=True))
 
 
 def test_moving_track_rule_drops_a_track_once_seen_on_long_held_structure():
     from experiments.perception_modes import MovingTrackRule
-    p = _rule_only(MovingTrackRule(measured=False, on_structure=0.2))
+    p = _rule_only(MovingTrackRule(on_structure=0.2))
     share = {"v": 0.0}
     p.structure_test = lambda c, s: share["v"]
     assert p._moving(_track(coasting=False))
@@ -110,7 +108,7 @@ def test_moving_track_rule_passes_a_near_person_cut_by_the_image_bottom(distance
     reaches the image's lower edge, so it is a person's (without the frame it fails the plain test). A box
     of the same top whose bottom is 0.3 m above that edge is not."""
     from experiments.perception_modes import MovingTrackRule
-    p, frame = _rule_only(MovingTrackRule(measured=False)), _camera_frame()
+    p, frame = _rule_only(MovingTrackRule()), _camera_frame()
     track = _cut_person(distance)
     assert track.size[2] < MovingTrackRule().height[0]
     assert p._moving(track, frame) and not p._moving(track)
@@ -119,7 +117,7 @@ def test_moving_track_rule_passes_a_near_person_cut_by_the_image_bottom(distance
 
 def test_moving_track_rule_height_test_is_unchanged_for_whole_boxes():
     from experiments.perception_modes import MovingTrackRule
-    p, frame = _rule_only(MovingTrackRule(measured=False)), _camera_frame()
+    p, frame = _rule_only(MovingTrackRule()), _camera_frame()
     assert p._moving(_track(coasting=False), frame)  # 1.7 m tall, 3 m ahead
     assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 0.6)), frame)  # a short box 3 m ahead, floor in view
     assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 2.6)), frame)  # taller than a person

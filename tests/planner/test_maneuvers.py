@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from planner.global_path import cost_to_go
-from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, hypotheses, static_clearance, view_costs
+from planner.maneuvers import ManeuverConfig, ManeuverSelector, hypotheses, static_clearance, view_costs
 from planner.mpc import MPC, MPCConfig
 from planner.types import ObstaclePrediction
 
@@ -210,21 +210,3 @@ def test_view_cost_is_nil_when_one_heading_sees_the_motion_and_the_walker_and_gr
     far = [[[10.0, 5.0], [10.0, 5.0]]]  # beyond the watch range: only the motion counts
     cost_f, arg_f = _view(fwd, far)
     assert cost_f[0] == pytest.approx(0.0) and HEADINGS[arg_f[0]] == 0.0
-
-
-def test_the_view_term_trades_path_for_a_view_the_camera_can_hold():
-    """A walker close behind and beside the drone that flies on: with the view term the choice keeps him and
-    its motion easier to hold in one view (lower view cost) than the choice without it, and its cost says so."""
-    sel0, sel1 = ManeuverSelector(), ManeuverSelector()
-    p, v = np.array([6.0, 0.0]), np.array([1.5, 0.0])
-    ob = _person(5.2, 0.9, 0.8, 0.0)  # just passed, walking the drone's way
-    watch = ob.predict(np.array([0.5, 1.0]))[None, :, :2]
-    term = lambda w: ViewTerm(w, HEADINGS, HALF_VIEW, 10, 1.0, 0.0, watch, np.array([5, 10]), 3.0, 0.05)  # noqa: E731
-    clear, field = _fields()
-    plain = sel0.choose(0.0, p, v, GOAL - p, [ob], clear, field, ORIGIN, RES, GOAL, view=term(0.0))
-    viewed = sel1.choose(0.0, p, v, GOAL - p, [ob], clear, field, ORIGIN, RES, GOAL, view=term(3.0))
-    assert "view" not in plain.parts and viewed.parts["view"] >= 0.0
-    c_plain = _view(plain.positions[None, 1:] - p, watch - p)[0][0]
-    c_viewed = _view(viewed.positions[None, 1:] - p, watch - p)[0][0]
-    assert c_plain > 0.0  # flying on at speed leaves him out of any view that holds the motion
-    assert c_viewed < c_plain and viewed.parts["view"] == pytest.approx(3.0 * c_viewed, abs=1e-3)

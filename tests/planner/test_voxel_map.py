@@ -102,9 +102,10 @@ def test_dynamic_clearing_leaves_no_trail_but_keeps_static_obstacles():
     assert m0.is_occupied([[3.58, 1.03, 0.5]]).all()
 
 
-def _walk_past_static(static_after, seen_before=20, frames=12):
+def _walk_past_static(static_after, seen_before=20, frames=12, protect_before=3):
     """A walker brushing the static box's front face after the box was seen for ``seen_before`` updates."""
-    m = VoxelMap(MapConfig(origin=SMALL.origin, size=SMALL.size, static_after=static_after))
+    m = VoxelMap(MapConfig(origin=SMALL.origin, size=SMALL.size, static_after=static_after,
+                           protect_before=protect_before))
     _feed(m, [STATIC, FAR_WALL], seen_before)
     for f in range(frames):  # along the face at x = 3.53, its box (+ margin) reaching 0.2 m into the box
         c = np.array([3.08, 0.2 + 1.4 * f / (frames - 1), 0.85])
@@ -116,9 +117,12 @@ def _walk_past_static(static_after, seen_before=20, frames=12):
 def test_a_walker_passing_a_long_seen_obstacle_does_not_erase_it():
     face = _pts([3.58], [0.93, 1.03, 1.13], [0.3, 0.6, 0.9])  # the face's voxels inside the walker's region
     assert np.all(_walk_past_static(15).is_occupied(face))
-    assert not np.any(_walk_past_static(0).is_occupied(face))  # the reference rule frees them
-    # seen only briefly before the walker came: not yet protected, freed as the reference does
-    assert not np.any(_walk_past_static(15, seen_before=3).is_occupied(face))
+    assert not np.any(_walk_past_static(0, protect_before=0).is_occupied(face))  # the reference rule frees them
+    # occupied (after its first five updates' hits) a few updates before the walker came, younger than
+    # static_after: kept all the same, since it was there before the walker's region reached it (without
+    # that rule, freed)
+    assert np.all(_walk_past_static(15, seen_before=9).is_occupied(face))
+    assert not np.any(_walk_past_static(15, seen_before=9, protect_before=0).is_occupied(face))
 
 
 def test_history_blocks_insertion_for_a_few_frames_only():

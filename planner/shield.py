@@ -1,0 +1,273 @@
+"""Passive safety as a constraint on any planner's plans (docs/planner.md).
+
+``PassiveSafetyShield`` wraps a planner (by default the maneuver + MPC planner of planner.navigator)
+and checks every plan it makes before the drone flies it. What the drone commits to is the plan flown
+for ``commit_time`` and then a stop: replanned every 0.1 s, the commitment is extended as long as it
+stays safe, and if a replan fails the stop is what is left (FASTER's back-up trajectory). The check
+(planner.safety): the commitment keeps clear of static structure, of every place a tracked or
+remembered person could get to, unless the drone is at rest or moving away from the threat. When the plan's commitment is not safe, the shield flies the
+safe motion (a target velocity, then a stop) nearest to what the planner wanted; when none is safe,
+the last safe commitment from now on; when that no longer is, the least unsafe motion.
+
+A person who stops being reported is remembered on the last prediction for ``memory`` seconds, the
+disc growing as a person's reach does, until the camera sees its place free again.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from planner.candidates import Candidates, backups, roll, target_velocities
+from planner.fallback import brake_and_hold
+from planner.safety import check, in_the_way
+from planner.types import ObstaclePrediction, PlannerInput, Trajectory
+
+
+@dataclass(frozen=True)
+class ShieldConfig:
+    dt: float = 0.1  # s, the commitment's step
+    commit_time: float = 0.2  # s a plan is followed before the committed stop begins
+    a_brake: float = 3.5  # m/s^2, the stop
+    a_emergency: float = 5.0  # m/s^2, the stop when nothing is safe (the controller tilts up to 35 deg: 6.9)
+    a_max: float = 2.5  # m/s^2, the alternatives' speeding up and turning
+    v_max: float = 2.0  # m/s
+    speeds: tuple[float, ...] = (0.3, 0.6, 1.0, 1.5)  # m/s, the alternatives' target speeds ...
+    directions: int = 24  # ... in this many directions
+    drone_radius: float = 0.43  # m: the collision box's horizontal circumradius (sim vehicle 0.51 x 0.70 m)
+    static_margin: float = 0.1  # m kept from structure beyond the radius
+    person_margin: float = 0.0  # m added to every person's disc
+    person_body: float = 0.3  # m: an unseen person's radius
+    person_accel: float = 0.0  # m/s^2 a person may change velocity by (a walker's speeding up and slowing)
+    person_speed: float = 1.6  # m/s a person walks at most
+    sigmas: float = 1.0  # position and velocity errors covered by the discs, in standard deviations
+    at_rest: float = 0.05  # m/s: a plan this slow is at rest (the fault rule's 0.1, less the hover's drift)
+    away_angle: float = math.radians(120.0)  # a threat this far off the motion is left behind
+    lag: float = 0.1  # s the drone follows its plan late by
+    memory: float = 2.0  # s a moving obstacle no longer reported is remembered
+    memory_min_age: float = 0.5  # s: only obstacles reported this long are remembered
+    memory_merge: float = 1.0  # m: an obstacle reported this near a remembered one is that one again
+    band: float = 0.5  # m: structure within this of the flight altitude counts
+    # choosing an alternative: the one nearest the planner's velocity, plus w_way per metre its resting
+    # place lies in a walker's way over the way_look seconds after (planner.safety.in_the_way)
+    w_way: float = 3.0
+    way_look: float = 2.0
+    hold_speed: float = 0.3  # m/s: stopping from slower than this holds a fixed point
+    hold_reanchor: float = 0.3  # m: a hold point farther than this from the drone is set anew
+
+
+def distance_to(mask: np.ndarray, res: float) -> np.ndarray:
+    """(nx, ny) metres from each cell's centre to the nearest cell of ``mask`` (exact Euclidean; OpenCV's
+    transform, several times faster than scipy's here)."""
+    return cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(float) * res
+
+
+class PassiveSafetyShield:
+    """Implements planner.types.Planner around another planner (module docstring)."""
+
+    def __init__(self, planner, cfg: ShieldConfig = ShieldConfig()):
+        self.planner = planner
+        self.cfg = cfg
+        self.reset()
+
+    def reset(self) -> None:
+        self.planner.reset()
+        self._fields = None
+        self._committed: Candidates | None = None  # the last safe commitment, as one motion
+        self._committed_t0 = 0.0
+        self._tracks: dict[int, tuple[float, float, ObstaclePrediction]] = {}  # id -> first, last stamp, last
+        self.interventions = 0
+        self._anchor = None  # (2,) where the current hold began
+
+    @property
+    def path(self):
+        return getattr(self.planner, "path", None)
+
+    # ------------------------------------------------------------------ what could be where
+
+    def _clearance(self, inp: PlannerInput) -> dict:
+        """Metres to static structure on the map's column grid at the flight altitude (cached on the map)."""
+        c, occ = self.cfg, inp.occupancy
+        key = (getattr(occ, "version", None), round(float(inp.goal[2]), 3))
+        if self._fields is not None and self._fields["key"] == key:
+            return self._fields
+        z = float(inp.goal[2])
+        solid = occ.column_blocked(z - c.band, z + c.band, inflate=False)
+        if inp.geofence is not None:
+            centres = occ.cell_to_world(np.argwhere(np.ones(solid.shape, bool))).reshape(solid.shape + (2,))
+            lo, hi = np.asarray(inp.geofence[0], float), np.asarray(inp.geofence[1], float)
+            solid = solid | ((centres[..., 0] < lo[0]) | (centres[..., 0] > hi[0]) | (centres[..., 1] < lo[1])
+                             | (centres[..., 1] > hi[1]))
+        res = occ.cfg.resolution
+        clear = distance_to(solid, res) - 0.5 * res if solid.any() else np.full(solid.shape, 1e3)
+        self._fields = {"key": key, "clear": np.ascontiguousarray(clear), "solid": solid, "origin": occ.xy_origin,
+                        "res": res}
+        return self._fields
+
+    def _people(self, inp: PlannerInput):
+        """Reach discs of the reported and the remembered moving obstacles: C0, Vp (M, 2), R0, G (M,)."""
+        c, now = self.cfg, inp.stamp
+        current = {}
+        for o in inp.obstacles:
+            if np.all(np.isfinite(o.center)) and np.all(np.isfinite(o.velocity)):
+                self._tracks[o.id] = (self._tracks.get(o.id, (now,))[0], now, o)
+                current[o.id] = o
+        rows = [self._disc(o, 0.0) for o in current.values()]
+        seen = inp.seen
+        for oid, (first, last, o) in list(self._tracks.items()):
+            if oid in current:
+                continue
+            age = now - last
+            ghost = self._disc(o, age)
+            lost = (age > c.memory or last - first < c.memory_min_age
+                    or any(np.hypot(*(np.asarray(q.center[:2]) - ghost[:2])) < c.memory_merge for q in current.values()))
+            if not lost and seen is not None:  # its place seen free since it was last reported
+                i, j = np.floor((np.asarray(ghost[:2]) - seen.origin) / seen.res).astype(int)
+                lost = 0 <= i < seen.shape[0] and 0 <= j < seen.shape[1] and seen.last[i, j] > last
+            if lost:
+                del self._tracks[oid]
+            else:
+                rows.append(ghost)
+        if not rows:
+            z = np.zeros((0, 2))
+            return z, z.copy(), np.zeros(0), np.zeros(0)
+        a = np.array(rows)
+        return (np.ascontiguousarray(a[:, :2]), np.ascontiguousarray(a[:, 2:4]), np.ascontiguousarray(a[:, 4]),
+                np.ascontiguousarray(a[:, 5]))
+
+    def _disc(self, o: ObstaclePrediction, age: float) -> list[float]:
+        """[cx, cy, vx, vy, r0, g] of an obstacle's reach disc ``age`` s after its report."""
+        c = self.cfg
+        v = np.asarray(o.velocity, float)[:2]
+        sp = float(np.hypot(*v))
+        if sp > c.person_speed:
+            v = v * (c.person_speed / sp)
+        size = np.asarray(o.size, float)
+        body = 0.5 * float(np.hypot(size[0], size[1])) if np.all(np.isfinite(size[:2])) else c.person_body
+        r0 = min(body, 1.0) + c.sigmas * float(o.position_std) + c.person_margin
+        g = c.sigmas * float(o.std_growth)
+        centre = np.asarray(o.center, float)[:2] + v * age
+        return [centre[0], centre[1], v[0], v[1], r0 + g * age + 0.5 * c.person_accel * age * age,
+                g + c.person_accel * age]
+
+    # ------------------------------------------------------------------ planning
+
+    def plan(self, inp: PlannerInput) -> Trajectory:
+        t0 = time.perf_counter()
+        try:
+            tr = self._plan(inp)
+        except Exception as e:  # noqa: BLE001 - a planner never raises: it stops instead, saying why
+            stamp = float(inp.stamp) if np.isfinite(inp.stamp) else 0.0
+            tr = brake_and_hold(stamp, inp.position, inp.velocity, a_max=self.cfg.a_brake, dt=self.cfg.dt,
+                                status=f"error:{type(e).__name__}")
+        return Trajectory(tr.t0, tr.dt, tr.positions, tr.velocities, tr.accelerations, tr.status,
+                          (time.perf_counter() - t0) * 1e3, tr.yaw)
+
+    def _plan(self, inp: PlannerInput) -> Trajectory:
+        c = self.cfg
+        for name, v in (("stamp", inp.stamp), ("position", inp.position), ("velocity", inp.velocity),
+                        ("goal", inp.goal)):
+            if not np.all(np.isfinite(v)):
+                return brake_and_hold(inp.stamp if np.isfinite(inp.stamp) else 0.0, inp.position, inp.velocity,
+                                      a_max=c.a_brake, dt=c.dt, status=f"invalid:{name}")
+        if inp.occupancy is None:
+            return self.planner.plan(inp)
+        fields = self._clearance(inp)
+        C0, Vp, R0, G = self._people(inp)
+        o, res = fields["origin"], fields["res"]
+        p0, v0 = np.asarray(inp.position, float), np.asarray(inp.velocity, float)
+        i, j = np.clip(np.floor((p0[:2] - o) / res).astype(int), 0, np.array(fields["clear"].shape) - 1)
+        need = min(c.drone_radius + c.static_margin, float(fields["clear"][i, j]) - 0.05)  # inside: no closer
+
+        def checked(motion: Candidates):
+            return check(motion.P, motion.V, c.dt, fields["clear"], o[0], o[1], res, C0, Vp, R0, G,
+                         c.person_accel, c.person_speed, need, c.drone_radius, c.at_rest, math.cos(c.away_angle),
+                         c.lag)
+
+        nominal = self.planner.plan(inp)
+        planned = self._sampled(nominal, inp, p0, v0)
+        commit = backups(planned.P, planned.V, c.commit_time, c.dt, c.a_brake, c.v_max)
+        ok, _ = checked(commit)
+        if ok[0]:
+            self._commit(commit, inp.stamp)
+            self._anchor = None
+            return nominal
+        # the plan's commitment is not safe: the safe motion nearest to it
+        self.interventions += 1
+        targets = target_velocities(0.0, c.speeds, c.directions)
+        alt = roll(p0, v0, targets, c.commit_time, c.dt, c.a_max, c.a_brake, c.v_max)
+        safe, violation = checked(alt)
+        want = planned.V[0, min(2, planned.V.shape[1] - 1)]
+        if safe.any():
+            way = in_the_way(alt.P, c.dt, C0, Vp, R0 + c.drone_radius, c.way_look)
+            cost = np.hypot(*(targets - want).T) + c.w_way * way
+            k = int(np.argmin(np.where(safe, cost, np.inf)))
+            if k == 0 and float(np.hypot(*v0[:2])) < c.hold_speed:
+                return self._hold(inp, nominal)
+            return self._fly(alt, k, inp, nominal, "shield:alternative")
+        prev = self._previous(inp)
+        if prev is not None and checked(prev)[0][0]:
+            return self._fly(prev, 0, inp, nominal, "shield:committed stop")
+        # nothing is safe: stop as hard as the drone can, to be at rest, or as slow as it can be, at contact
+        stop = brake_and_hold(inp.stamp, p0, v0, a_max=c.a_emergency, dt=c.dt)
+        motion = Candidates(stop.positions[None, :, :2], stop.velocities[None, :, :2], stop.accelerations[None, :, :2],
+                            np.zeros((1, 2)), np.zeros(1, np.int64))
+        return self._fly(motion, 0, inp, nominal, "shield:emergency stop")
+
+    def _sampled(self, tr: Trajectory, inp: PlannerInput, p0, v0) -> Candidates:
+        """The planned trajectory from now on, on the commitment's grid, as one motion (2D)."""
+        c = self.cfg
+        n = int(math.ceil(max(tr.duration, c.commit_time) / c.dt))
+        P, V = np.empty((1, n + 1, 2)), np.empty((1, n + 1, 2))
+        P[0, 0], V[0, 0] = p0[:2], v0[:2]
+        for k in range(1, n + 1):
+            p, v, _ = tr.sample(inp.stamp + k * c.dt)
+            P[0, k], V[0, k] = p[:2], v[:2]
+        return Candidates(P, V, np.zeros((1, n, 2)), np.zeros((1, 2)), np.zeros(1, np.int64))
+
+    def _commit(self, motion: Candidates, stamp: float) -> None:
+        self._committed = Candidates(motion.P[:1].copy(), motion.V[:1].copy(), motion.A[:1].copy(),
+                                     np.zeros((1, 2)), motion.commit[:1].copy())
+        self._committed_t0 = float(stamp)
+
+    def _previous(self, inp: PlannerInput) -> Candidates | None:
+        """The last safe commitment from now on (resting at its end), or None."""
+        m, c = self._committed, self.cfg
+        if m is None:
+            return None
+        s = int(round((inp.stamp - self._committed_t0) / c.dt))
+        if s < 0 or s >= m.P.shape[1]:
+            return None
+        P = np.concatenate([m.P[:, s:], np.repeat(m.P[:, -1:], s, axis=1)], axis=1)
+        V = np.concatenate([m.V[:, s:], np.zeros((1, s, 2))], axis=1)
+        A = np.concatenate([m.A[:, s:], np.zeros((1, s, 2))], axis=1)
+        return Candidates(P, V, A, m.targets, m.commit)
+
+    def _hold(self, inp: PlannerInput, nominal: Trajectory) -> Trajectory:
+        """Stay where the hold began (a fixed point: re-based on every plan, a hover drifts with the drone)."""
+        c = self.cfg
+        p0 = np.asarray(inp.position, float)
+        if self._anchor is None or float(np.hypot(*(self._anchor - p0[:2]))) > c.hold_reanchor:
+            self._anchor = p0[:2].copy()
+        n = int(round(c.commit_time / c.dt)) + 1
+        motion = Candidates(np.repeat(self._anchor[None, None], n + 1, axis=1), np.zeros((1, n + 1, 2)),
+                            np.zeros((1, n, 2)), np.zeros((1, 2)), np.zeros(1, np.int64))
+        return self._fly(motion, 0, inp, nominal, "shield:hold")
+
+    def _fly(self, motion: Candidates, k: int, inp: PlannerInput, nominal: Trajectory, status: str) -> Trajectory:
+        """Motion k as the trajectory (the altitude and heading of the planner's plan)."""
+        c = self.cfg
+        P, V, A = motion.P[k], motion.V[k], motion.A[k]
+        n = A.shape[0]
+        z = np.array([nominal.sample(inp.stamp + q * c.dt)[0][2] for q in range(n + 1)])
+        vz = np.array([nominal.sample(inp.stamp + q * c.dt)[1][2] for q in range(n + 1)])
+        az = np.diff(vz) / c.dt
+        self._committed = Candidates(motion.P[k:k + 1].copy(), motion.V[k:k + 1].copy(), motion.A[k:k + 1].copy(),
+                                     np.zeros((1, 2)), motion.commit[k:k + 1].copy())
+        self._committed_t0 = float(inp.stamp)
+        return Trajectory(t0=float(inp.stamp), dt=c.dt, positions=np.column_stack([P, z]),
+                          velocities=np.column_stack([V, vz]), accelerations=np.column_stack([A, az]), status=status,
+                          yaw=nominal.yaw)

@@ -1,0 +1,124 @@
+"""planner.shield: a plan is flown as it is while its commitment (followed for commit_time, then a stop) is
+safe; otherwise the shield flies a safe motion, the committed stop, or the hardest stop; it remembers
+people who leave the view, and never raises."""
+import math
+
+import numpy as np
+import pytest
+
+from planner.shield import PassiveSafetyShield, ShieldConfig
+from planner.types import ObstaclePrediction, PlannerInput, Trajectory
+from planner.visibility import SeenSpace
+from planner.voxel_map import MapConfig, VoxelMap
+
+GOAL = np.array([14.0, 0.0, 1.2])
+FENCE = (np.array([0.0, -2.0]), np.array([15.0, 2.0]))
+CFG = ShieldConfig()
+
+
+class Straight:
+    """A stand-in planner: flies at ``velocity`` (m/s, x and y) from wherever the drone is."""
+
+    def __init__(self, velocity):
+        self.velocity = np.array([velocity[0], velocity[1], 0.0])
+        self.calls = 0
+
+    def reset(self):
+        self.calls = 0
+
+    def plan(self, inp):
+        self.calls += 1
+        n, dt = 25, 0.1
+        t = dt * np.arange(n + 1)[:, None]
+        p = inp.position + self.velocity * t
+        return Trajectory(inp.stamp, dt, p, np.repeat(self.velocity[None], n + 1, axis=0), np.zeros((n, 3)),
+                          status="solved", yaw=0.0)
+
+
+def _map():
+    m = VoxelMap(MapConfig(origin=(-0.5, -2.5, -0.1), size=(16.0, 5.0, 3.2)))
+    m.set_known(np.zeros(m.log_odds.shape, bool))
+    return m
+
+
+def _person(oid, xy, v=(0.0, 0.0)):
+    return ObstaclePrediction(id=oid, center=np.array([xy[0], xy[1], 0.9]), size=np.array([0.5, 0.5, 1.8]),
+                              velocity=np.array([v[0], v[1], 0.0]), position_std=0.05)
+
+
+def _input(t, p, v, obstacles=(), occ=None, yaw=0.0, seen=None):
+    return PlannerInput(stamp=t, position=np.array([p[0], p[1], 1.2]), velocity=np.array([v[0], v[1], 0.0]),
+                        acceleration=np.zeros(3), goal=GOAL, obstacles=tuple(obstacles), occupancy=occ or _map(),
+                        yaw=yaw, geofence=FENCE, seen=seen)
+
+
+def test_a_safe_plan_is_flown_as_planned():
+    nominal = Straight((1.5, 0.0))
+    shield = PassiveSafetyShield(nominal, CFG)
+    inp = _input(0.0, (2.0, 0.0), (1.5, 0.0), [_person(1, (9.0, 1.5))])
+    tr = shield.plan(inp)
+    assert tr.status == "solved" and shield.interventions == 0
+    np.testing.assert_allclose(tr.positions, Straight((1.5, 0.0)).plan(inp).positions)
+
+
+def test_flying_into_a_standing_person_is_refused():
+    shield = PassiveSafetyShield(Straight((1.5, 0.0)), CFG)
+    person = _person(1, (3.3, 0.0))
+    tr = shield.plan(_input(0.0, (2.0, 0.0), (1.5, 0.0), [person]))
+    assert tr.status.startswith("shield:") and shield.interventions == 1
+    # whatever it flies instead stops short of the person's reach, or moves away from them
+    gap = np.hypot(*(tr.positions[:, :2] - person.center[:2]).T)
+    closing = (tr.velocities[:, :2] @ (person.center[:2] - tr.positions[:, :2]).T).diagonal() > 0
+    assert np.all(gap[closing] > CFG.drone_radius + 0.25) and np.hypot(*tr.velocities[-1, :2]) < 1e-6
+
+
+def test_moving_away_from_a_walker_who_follows_is_allowed():
+    """A walker coming up from behind faster than the drone: contact would be a hit from behind."""
+    shield = PassiveSafetyShield(Straight((1.0, 0.0)), CFG)
+    tr = shield.plan(_input(0.0, (5.0, 0.0), (1.0, 0.0), [_person(1, (4.0, 0.0), (1.6, 0.0))]))
+    assert tr.status == "solved"
+
+
+def test_a_person_who_left_the_view_is_remembered_until_their_place_is_seen_free():
+    shield = PassiveSafetyShield(Straight((1.5, 0.0)), CFG)
+    occ = _map()
+    seen = SeenSpace(occ.xy_origin, tuple(occ.dims[:2]), occ.res)
+    for k in range(8):  # reported for 0.7 s, standing ahead
+        shield.plan(_input(0.1 * k, (1.0, 0.0), (0.0, 0.0), [_person(4, (3.6, 0.0))], occ=occ, seen=seen))
+    tr = shield.plan(_input(0.8, (2.4, 0.0), (1.5, 0.0), [], occ=occ, seen=seen))  # not reported any more
+    assert tr.status.startswith("shield:")  # still there as far as the shield knows
+    # the camera sees the place free: forgotten, and the plan is flown
+    K = type("K", (), dict(fx=387.15, fy=387.15, cx=321.3, cy=233.5, width=640, height=480))()
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    T[:3, 3] = [2.4, 0.0, 1.2]
+    seen.observe_map(occ.column_blocked(0.8, 1.6, inflate=False), K, T, 0.85)
+    tr = shield.plan(_input(0.9, (2.4, 0.0), (1.5, 0.0), [], occ=occ, seen=seen))
+    assert tr.status == "solved"
+
+
+def test_when_nothing_is_safe_the_drone_stops_as_hard_as_it_can():
+    shield = PassiveSafetyShield(Straight((2.0, 0.0)), CFG)
+    tr = shield.plan(_input(0.0, (2.0, 0.0), (2.0, 0.0), [_person(1, (2.9, 0.0), (-1.5, 0.0)),
+                                                           _person(2, (2.0, 1.0), (0.0, -1.0)),
+                                                           _person(3, (2.0, -1.0), (0.0, 1.0))]))
+    assert tr.status in ("shield:emergency stop", "shield:alternative")
+    assert np.all(np.isfinite(tr.positions))
+    if tr.status == "shield:emergency stop":
+        assert np.linalg.norm(tr.accelerations[0, :2]) == pytest.approx(CFG.a_emergency)
+
+
+@pytest.mark.parametrize("field,value", [("position", math.nan), ("velocity", math.inf), ("goal", math.inf),
+                                         ("stamp", math.nan)])
+def test_bad_input_gives_a_finite_stop_saying_why(field, value):
+    shield = PassiveSafetyShield(Straight((1.0, 0.0)), CFG)
+    kw = dict(stamp=0.0, position=np.array([2.0, 0.0, 1.2]), velocity=np.zeros(3), acceleration=np.zeros(3),
+              goal=GOAL.copy(), obstacles=(), occupancy=_map(), yaw=0.0, geofence=FENCE)
+    if field == "stamp":
+        kw["stamp"] = value
+    else:
+        kw[field] = kw[field].copy()
+        kw[field][0] = value
+    tr = shield.plan(PlannerInput(**kw))
+    assert tr.status == f"invalid:{field}"
+    assert all(np.all(np.isfinite(a)) for a in (tr.positions, tr.velocities, tr.accelerations))
