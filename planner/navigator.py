@@ -68,6 +68,23 @@ _HEADINGS = np.radians(np.arange(-180, 180, 5.0))  # the heading's choices
 _PLAUSIBLE = 1e6
 
 
+def valid_input(inp: PlannerInput) -> bool:
+    """Whether a plan can be made from ``inp``: stamp, position, velocity, acceleration, goal and heading
+    finite (3,) values of a size some vehicle reaches (_PLAUSIBLE)."""
+    try:
+        return (all(np.shape(x) == (3,) and np.all(np.abs(np.asarray(x, dtype=float)) <= _PLAUSIBLE)
+                    for x in (inp.position, inp.velocity, inp.acceleration, inp.goal))
+                and abs(float(inp.stamp)) <= 1e9 and (inp.yaw is None or abs(float(inp.yaw)) <= 1e3))
+    except (TypeError, ValueError):
+        return False
+
+
+def invalid_input_stop(inp: PlannerInput, a_max: float) -> Trajectory:
+    """Brake and hold on what of ``inp`` is finite, status ``fallback:invalid_input``."""
+    return brake_and_hold(_finite_or(inp.stamp, 0.0), _vector_or_zero(inp.position), _vector_or_zero(inp.velocity),
+                          a_max=a_max, status="fallback:invalid_input")
+
+
 def _finite_or(x, default: float) -> float:
     try:
         x = float(x)
@@ -258,15 +275,8 @@ class MPCPlanner:
         have left half updated."""
         tic = time.perf_counter()
         a_max = self.cfg.mpc.a_max_xy
-        try:
-            valid = (all(np.shape(x) == (3,) and np.all(np.abs(np.asarray(x, dtype=float)) <= _PLAUSIBLE)
-                         for x in (inp.position, inp.velocity, inp.acceleration, inp.goal))
-                     and abs(float(inp.stamp)) <= 1e9 and (inp.yaw is None or abs(float(inp.yaw)) <= 1e3))
-        except (TypeError, ValueError):
-            valid = False
-        if not valid:
-            return brake_and_hold(_finite_or(inp.stamp, 0.0), _vector_or_zero(inp.position),
-                                  _vector_or_zero(inp.velocity), a_max=a_max, status="fallback:invalid_input")
+        if not valid_input(inp):
+            return invalid_input_stop(inp, a_max)
         try:
             traj = self._plan(inp, tic)
             if not (isinstance(traj, Trajectory) and all(np.all(np.isfinite(a)) for a in (

@@ -23,6 +23,7 @@ import numpy as np
 
 from planner.candidates import Candidates, backups, roll, target_velocities
 from planner.fallback import brake_and_hold
+from planner.navigator import invalid_input_stop, valid_input
 from planner.safety import check, in_the_way
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 
@@ -160,19 +161,16 @@ class PassiveSafetyShield:
         try:
             tr = self._plan(inp)
         except Exception as e:  # noqa: BLE001 - a planner never raises: it stops instead, saying why
-            stamp = float(inp.stamp) if np.isfinite(inp.stamp) else 0.0
-            tr = brake_and_hold(stamp, inp.position, inp.velocity, a_max=self.cfg.a_brake, dt=self.cfg.dt,
-                                status=f"error:{type(e).__name__}")
+            self.reset()  # the error may have left its state half updated
+            tr = invalid_input_stop(inp, self.cfg.a_brake)
+            tr = Trajectory(tr.t0, tr.dt, tr.positions, tr.velocities, tr.accelerations, f"error:{type(e).__name__}")
         return Trajectory(tr.t0, tr.dt, tr.positions, tr.velocities, tr.accelerations, tr.status,
                           (time.perf_counter() - t0) * 1e3, tr.yaw)
 
     def _plan(self, inp: PlannerInput) -> Trajectory:
         c = self.cfg
-        for name, v in (("stamp", inp.stamp), ("position", inp.position), ("velocity", inp.velocity),
-                        ("goal", inp.goal)):
-            if not np.all(np.isfinite(v)):
-                return brake_and_hold(inp.stamp if np.isfinite(inp.stamp) else 0.0, inp.position, inp.velocity,
-                                      a_max=c.a_brake, dt=c.dt, status=f"invalid:{name}")
+        if not valid_input(inp):
+            return invalid_input_stop(inp, c.a_brake)
         if inp.occupancy is None:
             return self.planner.plan(inp)
         fields = self._clearance(inp)

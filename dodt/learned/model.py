@@ -114,7 +114,8 @@ class PersonDetector2D:
                              "a person detector takes one image")
         self._input = inputs[0].name
         want_out = [list(ours_layout.output_shape(st)) for st in ours_layout.STRIDES]
-        ours = layout == "dodt" or (layout == "auto" and len(outputs) == 1 and list(outputs[0].shape) in want_out)
+        # auto: a grid output (rank 4) is our layout, checked against our strides; YOLO outputs are rank 3
+        ours = layout == "dodt" or (layout == "auto" and len(outputs) == 1 and len(outputs[0].shape) == 4)
         self.format: yolo.YoloFormat | None = None
         if ours:
             if not has_record:
