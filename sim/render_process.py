@@ -30,12 +30,12 @@ class RenderProcessError(RuntimeError):
     """The render process failed or stopped answering."""
 
 
-def _serve(conn, scenario, seed, renderer, segmentation, light_direction) -> None:
+def _serve(conn, scenario, seed, renderer, segmentation, light_direction, color) -> None:
     from sim.world import World  # in the child only
 
     try:
         world = World(scenario, seed=seed, renderer=renderer, segmentation=segmentation,
-                      light_direction=light_direction)
+                      light_direction=light_direction, color=color)
     except Exception as e:  # noqa: BLE001 - reported to the parent, which raises it
         conn.send(("error", f"{type(e).__name__}: {e}"))
         return
@@ -75,7 +75,8 @@ def _serve(conn, scenario, seed, renderer, segmentation, light_direction) -> Non
 class RenderProcess:
     """Parent side: ``submit`` frames in capture order, ``result`` them in the same order."""
 
-    def __init__(self, scenario, seed: int, renderer: str, segmentation: bool, light_direction=None):
+    def __init__(self, scenario, seed: int, renderer: str, segmentation: bool, light_direction=None,
+                 color: bool = True):
         # A fresh interpreter (no PyBullet/EGL or thread state copied from us, and, unlike
         # multiprocessing's spawn, no re-import of the user's main script) on one end of a socket pair.
         ours, theirs = socket.socketpair()
@@ -88,7 +89,7 @@ class RenderProcess:
         theirs.close()
         self._conn = Connection(os.dup(ours.fileno()))
         ours.close()
-        self._conn.send((scenario, seed, renderer, segmentation, light_direction))
+        self._conn.send((scenario, seed, renderer, segmentation, light_direction, color))
         self._outstanding: list[int] = []
         self.render_wall_time = 0.0
         kind, value = self._recv(_START_TIMEOUT_S, "starting")
