@@ -151,7 +151,8 @@ def context_info() -> dict:
     """The GL renderer and version strings of the shared context ({} when there is none)."""
     if not gl_available():
         return {}
-    info = _ctx.info
+    with _Current():
+        info = _ctx.info
     return {"renderer": info.get("GL_RENDERER"), "version": info.get("GL_VERSION"),
             "threads": os.environ.get("LP_NUM_THREADS")}
 

@@ -190,3 +190,41 @@ def test_obstacle_memory_forgets_a_place_the_camera_sees_empty():
     kept = mem.extra(set(), 0.5, T, K)
     assert [o.id for o in kept] == [4]  # 3 m ahead in view and not reported: gone; 8 m: beyond what depth proves
     assert 3 not in mem.last
+
+
+class _Looking(_Blind):
+    """Records whether its frames carried colour; ``uses_color`` as given."""
+
+    def __init__(self, uses_color):
+        self.uses_color = uses_color
+        self.colors = []
+
+    def update(self, frame, truth=None):
+        self.colors.append(frame.color is not None)
+        return super().update(frame, truth)
+
+
+@pytest.mark.parametrize("renderer", ["gl", "tiny"])
+def test_frames_carry_colour_only_for_a_perception_that_reads_it(renderer):
+    """A module declaring uses_color = False gets depth-only frames (the gl renderer then skips colour); one
+    that reads colour, or does not say, gets it. EpisodeConfig.renderer picks the renderer."""
+    from conftest import RENDERERS
+
+    if renderer not in RENDERERS:
+        pytest.skip(f"{renderer} not available here")
+    cfg = EpisodeConfig(duration=0.3, renderer=renderer, render_process=False)
+    for uses_color in (False, True):
+        perc = _Looking(uses_color)
+        s = run_episode(make_scenario(), seed=0, perception=perc, cfg=cfg)
+        assert s["environment"]["renderer"] == renderer
+        assert len(perc.colors) >= 8 and set(perc.colors) == {uses_color}
+    silent = _Looking(True)
+    del silent.uses_color  # says nothing: taken to read colour
+    run_episode(make_scenario(), seed=0, perception=silent, cfg=cfg)
+    assert all(silent.colors)
+    watched = _Looking(False)  # a viewer (on_frame) may show the colour
+    run_episode(make_scenario(), seed=0, perception=watched, cfg=cfg, on_frame=lambda view: None)
+    assert all(watched.colors)
+    from experiments.perception_modes import make_perception
+
+    assert make_perception("dodt").uses_color is False and make_perception("oracle").uses_color is False
