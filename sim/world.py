@@ -240,7 +240,7 @@ class World:
         self._render_wall_time = 0.0  # s spent inside the renderer (for benchmarks)
         self._truth: GroundTruth | None = None
         self._pending: list[_Capture] = []  # captured frames not yet delivered (frame_latency)
-        self.last_buffers = None  # the renderer's raw buffers of the last frame rendered in this process
+        self.last_images = None  # (depth mm, colour, segmentation) of the last frame rendered in this process
         self._last_reference: Reference | None = None
         self._camera_path = self._make_camera_path()
         self._rotor_speed = np.full(4, math.sqrt(self.vehicle.mass * GRAVITY / (4 * self.vehicle.kf)))
@@ -672,7 +672,6 @@ class World:
             out = render_buffers(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
                                  light_direction=self.light_direction)
         self._render_wall_time += time.perf_counter() - t0
-        self.last_buffers = out
         return out
 
     def _finish_images(self, rgba: np.ndarray, zbuf: np.ndarray, seg_ids: np.ndarray | None):
@@ -692,6 +691,7 @@ class World:
             s = out.segmentation
             s = np.where((s >= -1) & (s + 1 < len(self._seg_lut)), s, -1)
             seg = self._seg_lut[s + 1]
+        self.last_images = (depth_mm, color, seg)
         return depth_mm, color, seg
 
     def people_poses(self) -> list:
@@ -704,11 +704,17 @@ class World:
 
     def render_at(self, pos, quat, people) -> tuple:
         """Pose the drone at (pos, quat) and the people at their ``people_poses`` and render: the
-        renderer's raw buffers (the render process's entry; nothing is stepped, no noise is drawn)."""
+        renderer's raw buffers (nothing is stepped, no noise is drawn)."""
         p.resetBasePositionAndOrientation(self.drone, list(pos), list(quat), physicsClientId=self._client)
         for w, pose in zip(self.walkers, people):
             w.apply_pose(p, pose)
         return self._render_buffers(self._T_from_pose(pos, quat) @ self.T_body_camera)
+
+    def images_at(self, pos, quat, people) -> tuple:
+        """``render_at``, then the frame's images as a capture makes them: (depth in mm with the depth
+        noise, colour or None, obstacle ids or None). The render process's entry: it draws the noise from
+        its own copy of this world's noise stream, frame after frame in capture order, as one process would."""
+        return self._finish_images(*self.render_at(pos, quat, people))
 
     def _capture(self) -> SensorFrame | None:
         """Capture a frame now; deliver (and return) the one captured ``frame_latency`` camera
@@ -730,8 +736,8 @@ class World:
         while self._pending and self._pending[0].seq <= seq - self.frame_latency:
             c = self._pending.pop(0)
             images = c.images
-            if images is None:  # rendered beside us; the noise is drawn here, in capture order as in one process
-                images = self._finish_images(*self._render_proc.result(c.seq))
+            if images is None:  # rendered beside us, the noise drawn there (in capture order, as in one process)
+                images = self._render_proc.result(c.seq)
             depth_mm, color, seg = images
             self._frame = SensorFrame(depth=depth_mm, color=color, intrinsics=self.intrinsics,
                                       T_world_camera=c.T_odom, stamp=c.stamp, seq=c.seq)
