@@ -364,7 +364,7 @@ class GLRenderer:
             for shape in p.getVisualShapeData(body, physicsClientId=c):
                 _, link, geom, dims, mesh_file, local_pos, local_orn, rgba = shape[:8]
                 if rgba[3] <= 0.0:
-                    continue  # invisible
+                    continue  # invisible (any other alpha is drawn opaque: the scenes hold no transparency)
                 try:
                     v, nv, t = shape_mesh(geom, dims)
                 except GLUnsupportedScene as e:
@@ -405,9 +405,6 @@ class GLRenderer:
         self._tris = np.concatenate(tri_l).astype("<i4")
         self._part_data = np.zeros((len(self.parts), 5, 4), dtype="<f4")
         self._part_data[:, 4, 3] = [pt.body for pt in self.parts]
-        self._body_parts: dict[int, list[int]] = {}
-        for i, pt in enumerate(self.parts):
-            self._body_parts.setdefault(pt.body, []).append(i)
 
     def _track(self, obj):
         self._objects.append(obj)
