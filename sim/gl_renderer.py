@@ -1,20 +1,20 @@
 """Our own OpenGL camera (moderngl on an EGL context; Mesa's llvmpipe without a GPU).
 
 It draws the visual shapes a PyBullet client holds (boxes, spheres, capsules, cylinders: what the
-corridor, the obstacles, the DeepMimic humanoid and the quadrotor are made of) at the poses PyBullet
-holds when ``render`` is called, with the same projection as ``sim.camera`` (``projection_matrix``:
+corridor, the obstacles, the DeepMimic humanoid and the quadrotor are made of) as the same meshes
+PyBullet's renderers draw for them, at the poses PyBullet holds when ``render`` is called, with the
+same projection as ``sim.camera`` (``projection_matrix``:
 the intrinsics exactly, pixel centres sampled, row 0 at the top) and hands back the same raw buffers
 as PyBullet's ``getCameraImage`` path: RGBA (H, W, 4) uint8, the depth buffer (H, W) float32 in
 [0, 1] (1 where nothing was hit; ``sim.camera.linearize_depth`` makes it metric planar depth) and
 PyBullet body ids (H, W) int32 with -1 for the background. So the depth noise, the segmentation
 lookup and the render process work unchanged on either renderer.
 
-How it is drawn: every visual shape is tessellated once, in its link's frame, into one vertex buffer
-(round shapes on a grid whose edges stay within ``CHORD_TOLERANCE`` of the surface, the diagonals of its
-cells within twice that); each vertex names its link (a "part"). Per frame the link poses are read from PyBullet, each part's model-view-projection matrix is
-composed in float64 and uploaded with the light direction in the part's frame as one small float
+How it is drawn: every visual shape becomes a mesh once (see "meshes" below), in its link's frame, in
+one vertex buffer; each vertex names its link (a "part"). Per frame the link poses are read from
+PyBullet, each part's model-view-projection matrix is composed in float64 and uploaded with the light direction in the part's frame as one small float
 texture, and the whole scene is one indexed draw call. Colour is Lambert shading per vertex with an
-ambient term (not PyBullet's shading: colours differ from PyBullet's images, geometry does not).
+ambient term (not PyBullet's shading: colours differ from PyBullet's images, depth and body ids do not).
 
 The GL context is created once per process and kept (``shared_context``): successive worlds in one
 process (a sweep worker's episodes) reuse it; a renderer frees only its own buffers.
@@ -24,14 +24,13 @@ from __future__ import annotations
 import math
 import os
 import threading
+from functools import lru_cache
 
 import numpy as np
 
 from dodt.frames import CameraIntrinsics
 from sim.camera import FAR_PLANE, NEAR_PLANE, projection_matrix, view_matrix
 
-CHORD_TOLERANCE = 0.001  # m: the largest gap between a round surface and the edges of its tessellation's grid
-MIN_SEGMENTS, MAX_SEGMENTS = 12, 128  # around a round shape's axis
 BACKGROUND = (0.7, 0.7, 0.8)  # RGB where nothing is hit: PyBullet's EGL background (measured on its images)
 # Shading: a surface shows its colour times AMBIENT + (1 - AMBIENT) max(0, n . l), l the unit direction
 # towards the light. The default light comes from above and behind a camera flying along +x, so that,
@@ -157,70 +156,83 @@ def context_info() -> dict:
             "threads": os.environ.get("LP_NUM_THREADS")}
 
 
-# --------------------------------------------------------------------------- tessellation
+# --------------------------------------------------------------------------- meshes
+#
+# The meshes PyBullet's renderers draw for its primitive shapes (measured against its EGL plugin's images:
+# the same pixels, depth within hundredths of a millimetre; tests/sim/test_gl_renderer.py). A box is drawn
+# as it is. A sphere, capsule or cylinder is drawn as a convex polyhedron: the hull of the shape's support
+# points along 42 fixed directions (the vertices of an icosahedron with two vertices on the z axis, and the
+# midpoints of its edges, pushed out onto the unit sphere). The support points are those of a sphere for a
+# sphere; for a cylinder, of its two rims as 32-gons (vertex i at (r sin a, r cos a), a = 2 pi i / 32) with a
+# 1 mm margin around them; a capsule adds its two poles. Where two points tie, the first in that order wins
+# (upper rim before lower). People therefore look as faceted as in PyBullet's images, a little inside their
+# collision shapes.
+
+PYBULLET_HULL_MARGIN = 0.001  # m, around the rim polygons of a cylinder or capsule
+_RIM_VERTICES = 32
 
 
-def segments_for(radius: float, tolerance: float = CHORD_TOLERANCE) -> int:
-    """Segments around a circle of ``radius`` whose chords stay within ``tolerance`` of it."""
-    if radius <= tolerance:
-        return MIN_SEGMENTS
-    n = math.ceil(math.pi / math.acos(1.0 - tolerance / radius))
-    return int(min(max(n, MIN_SEGMENTS), MAX_SEGMENTS))
+def _hull_directions() -> np.ndarray:
+    """The 42 unit directions: an icosahedron with vertices at the poles, its lower ring at azimuths 36 + 72 k
+    degrees and its upper ring at 72 k degrees, then its 30 edge midpoints normalised."""
+    ring_z = 1.0 / math.sqrt(5.0)
+    ring_r = 2.0 * ring_z
+    verts = [(0.0, 0.0, -1.0)]
+    verts += [(ring_r * math.cos(math.radians(36 + 72 * k)), ring_r * math.sin(math.radians(36 + 72 * k)), -ring_z)
+              for k in range(5)]
+    verts += [(ring_r * math.cos(math.radians(72 * k)), ring_r * math.sin(math.radians(72 * k)), ring_z)
+              for k in range(5)]
+    verts.append((0.0, 0.0, 1.0))
+    v = np.array(verts)
+    dist = np.linalg.norm(v[:, None] - v[None], axis=2)
+    edge = dist[dist > 1e-9].min()
+    mids = [(v[i] + v[j]) / 2 for i in range(12) for j in range(i + 1, 12) if abs(dist[i, j] - edge) < 1e-9]
+    mids = [m / np.linalg.norm(m) for m in mids]
+    return np.vstack([v, np.array(mids)])
 
 
-def _lathe(strips, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A surface of revolution about z: ``strips`` are profiles, each a list of (r, z, nr, nz) from
-    bottom to top (a point at radius r, height z, with the surface normal (nr, nz) in the r-z plane).
-    Returns (positions (V, 3), normals (V, 3), triangles (T, 3)) with outward-facing, counter-clockwise
-    triangles."""
-    ang = np.arange(n + 1) * (2.0 * math.pi / n)
-    c, s = np.cos(ang), np.sin(ang)
-    c[-1], s[-1] = 1.0, 0.0  # the seam closes exactly
-    pos, nrm, tri = [], [], []
-    base = 0
-    for prof in strips:
-        prof = np.asarray(prof, dtype=float)
-        m = len(prof)
-        r, z, nr, nz = (prof[:, k][:, None] for k in range(4))
-        pos.append(np.stack([r * c, r * s, np.broadcast_to(z, (m, n + 1))], axis=-1).reshape(-1, 3))
-        nrm.append(np.stack([nr * c, nr * s, np.broadcast_to(nz, (m, n + 1))], axis=-1).reshape(-1, 3))
-        i, j = np.meshgrid(np.arange(m - 1), np.arange(n), indexing="ij")
-        a = base + i * (n + 1) + j  # (i, j): profile point i at angle j
-        b, cc, d = a + 1, a + (n + 1), a + (n + 1) + 1  # (i, j+1), (i+1, j), (i+1, j+1)
-        tri.append(np.stack([np.stack([a, b, cc], -1), np.stack([b, d, cc], -1)], axis=2).reshape(-1, 3))
-        base += m * (n + 1)
-    return np.concatenate(pos), np.concatenate(nrm), np.concatenate(tri)
+HULL_DIRECTIONS = _hull_directions()
 
 
-def _hemisphere_profile(radius: float, z0: float, rings: int, top: bool):
-    """Profile points of a hemisphere of ``radius`` centred at height z0, from its pole up (bottom) or from its
-    equator up (top)."""
-    phis = np.linspace(-math.pi / 2, 0.0, rings + 1) if not top else np.linspace(0.0, math.pi / 2, rings + 1)
-    return [(radius * math.cos(f), z0 + radius * math.sin(f), math.cos(f), math.sin(f)) for f in phis]
+def _support_hull(points: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat-shaded mesh of the convex hull of the support points of ``points`` (with ``margin`` around them)
+    along HULL_DIRECTIONS: (positions (3T, 3), face normals per vertex, triangles (T, 3)), outward and
+    counter-clockwise."""
+    from scipy.spatial import ConvexHull
+
+    d = HULL_DIRECTIONS
+    support = points[np.argmax(d @ points.T, axis=1)] + margin * d  # argmax: the first of tied points
+    pts = np.unique(support, axis=0)
+    tri = ConvexHull(pts).simplices
+    a, b, c = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
+    n = np.cross(b - a, c - a)
+    inward = np.einsum("ij,ij->i", n, a - pts.mean(axis=0)) < 0
+    tri[inward] = tri[inward][:, ::-1]
+    n[inward] *= -1.0
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return pts[tri].reshape(-1, 3), np.repeat(n, 3, axis=0), np.arange(3 * len(tri)).reshape(-1, 3)
+
+
+def _rims(radius: float, length: float) -> np.ndarray:
+    """The upper and lower rim polygons of a cylinder along z, vertex by vertex (upper first)."""
+    a = 2.0 * np.pi * np.arange(_RIM_VERTICES) / _RIM_VERTICES
+    x, y = radius * np.sin(a), radius * np.cos(a)
+    h = np.full_like(a, length / 2)
+    return np.stack([np.stack([x, y, h], -1), np.stack([x, y, -h], -1)], axis=1).reshape(-1, 3)
 
 
 def sphere_mesh(radius: float):
-    n = segments_for(radius)
-    rings = math.ceil(n / 4)  # per hemisphere: an angular step along the meridians no larger than around
-    prof = _hemisphere_profile(radius, 0.0, rings, top=False) + _hemisphere_profile(radius, 0.0, rings, top=True)[1:]
-    return _lathe([prof], n)
+    return _support_hull(np.zeros((1, 3)), radius)
 
 
 def capsule_mesh(radius: float, length: float):
     """A capsule along z: a cylinder of ``length`` between two hemispheres (Bullet's and URDF's convention)."""
-    n = segments_for(radius)
-    rings = math.ceil(n / 4)
-    h = length / 2
-    prof = _hemisphere_profile(radius, -h, rings, top=False) + _hemisphere_profile(radius, h, rings, top=True)
-    return _lathe([prof], n)
+    poles = np.array([[0.0, 0.0, length / 2 + radius], [0.0, 0.0, -length / 2 - radius]])
+    return _support_hull(np.vstack([_rims(radius, length), poles]), PYBULLET_HULL_MARGIN)
 
 
 def cylinder_mesh(radius: float, length: float):
-    n = segments_for(radius)
-    h = length / 2
-    return _lathe([[(0.0, -h, 0.0, -1.0), (radius, -h, 0.0, -1.0)],
-                   [(radius, -h, 1.0, 0.0), (radius, h, 1.0, 0.0)],
-                   [(radius, h, 0.0, 1.0), (0.0, h, 0.0, 1.0)]], n)
+    return _support_hull(_rims(radius, length), PYBULLET_HULL_MARGIN)
 
 
 def box_mesh(half_extents):
@@ -245,18 +257,23 @@ def box_mesh(half_extents):
     return np.array(pos), np.array(nrm), np.array(tri)
 
 
-def shape_mesh(geom: int, dims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The mesh of one PyBullet visual shape, from ``getVisualShapeData``'s type and dimensions (box: full
-    extents; sphere: radius first; capsule and cylinder: length, then radius)."""
+@lru_cache(maxsize=512)
+def shape_mesh(geom: int, dims: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mesh PyBullet draws for one visual shape, from ``getVisualShapeData``'s type and dimensions (box:
+    full extents; sphere: radius first; capsule and cylinder: length, then radius). Cached: read-only."""
     if geom == GEOM_BOX:
-        return box_mesh(np.asarray(dims[:3], dtype=float) / 2)
-    if geom == GEOM_SPHERE:
-        return sphere_mesh(float(dims[0]))
-    if geom == GEOM_CAPSULE:
-        return capsule_mesh(float(dims[1]), float(dims[0]))
-    if geom == GEOM_CYLINDER:
-        return cylinder_mesh(float(dims[1]), float(dims[0]))
-    raise GLUnsupportedScene(f"a {_GEOM_NAMES.get(geom, f'type {geom}')} shape")
+        mesh = box_mesh(np.asarray(dims[:3], dtype=float) / 2)
+    elif geom == GEOM_SPHERE:
+        mesh = sphere_mesh(float(dims[0]))
+    elif geom == GEOM_CAPSULE:
+        mesh = capsule_mesh(float(dims[1]), float(dims[0]))
+    elif geom == GEOM_CYLINDER:
+        mesh = cylinder_mesh(float(dims[1]), float(dims[0]))
+    else:
+        raise GLUnsupportedScene(f"a {_GEOM_NAMES.get(geom, f'type {geom}')} shape")
+    for a in mesh:
+        a.setflags(write=False)
+    return mesh
 
 
 # --------------------------------------------------------------------------- poses
@@ -366,7 +383,7 @@ class GLRenderer:
                 if rgba[3] <= 0.0:
                     continue  # invisible (any other alpha is drawn opaque: the scenes hold no transparency)
                 try:
-                    v, nv, t = shape_mesh(geom, dims)
+                    v, nv, t = shape_mesh(geom, tuple(dims))
                 except GLUnsupportedScene as e:
                     name = p.getBodyInfo(body, physicsClientId=c)[1].decode("utf-8", "replace")
                     extra = f" ({mesh_file.decode('utf-8', 'replace')})" if mesh_file else ""
