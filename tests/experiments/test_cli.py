@@ -80,8 +80,7 @@ def test_sweep_renderer_option_reaches_every_episode(monkeypatch, tmp_path, rend
 
     def fake(scenario, seeds, perception, out, jobs, dask_address, keep_logs, progress, cfg):
         seen.append(cfg.renderer)
-        return {"scenario": scenario, "perception": perception, "episodes": 0,
-                "rates": {k: {"rate": 0.0, "ci95": [0.0, 1.0]} for k in ("success", "collision", "timeout")}}
+        return sweep.aggregate([], scenario, perception)
 
     monkeypatch.setattr(sweep, "run_sweep", fake)
     args = ["sweep", "corridor", "--seeds", "0:2", "--out", str(tmp_path)] + (["--renderer", renderer] if renderer else [])

@@ -204,6 +204,23 @@ def test_a_shape_it_cannot_draw_is_a_clear_error():
         p.disconnect(c)
 
 
+def test_depth_lies_on_pybullets_16_bit_grid_and_24_bits_are_finer():
+    w = World(make_scenario(NO_NOISE), seed=0, renderer="gl")
+    T = w.ground_truth().T_world_camera
+    _, z16, _ = w._gl.render(T)
+    k = z16.astype(np.float64) * 65535
+    np.testing.assert_allclose(k, np.rint(k), atol=1e-3)  # k / 65535, as PyBullet's EGL plugin gives
+    fine = glr.GLRenderer(w._gl.p, w._client, w.intrinsics, depth_bits=24)
+    _, z24, _ = fine.render(T)
+    steps = np.diff(np.unique(z24[z24 < 1.0]))
+    assert steps.min() < 1e-6 < 1.5e-5 < np.diff(np.unique(z16[z16 < 1.0])).min()
+    assert np.max(np.abs(z24 - z16)) <= 0.5 / 65535 + 1e-7
+    fine.release()
+    with pytest.raises(ValueError, match="depth_bits"):
+        glr.GLRenderer(w._gl.p, w._client, w.intrinsics, depth_bits=32)
+    w.close()
+
+
 def test_a_bad_light_direction_is_a_clear_error():
     w = World(make_scenario(NO_NOISE), seed=0, renderer="gl")
     with pytest.raises(ValueError, match="light_direction"):
