@@ -1,6 +1,9 @@
 """`dodt-nav bench sim`: render, physics and real-time figures of the simulator.
 
-Prints medians; every figure is wall-clock time on this machine, single process.
+Prints medians; every figure is wall-clock time on this machine, single process. The renderers are
+measured side by side on the same view: ours (gl), PyBullet's EGL plugin (pybullet) and PyBullet's
+TinyRenderer (tiny); a render call is the renderer's buffers decoded into metric depth and RGB, as a
+frame gets them (depth-only: gl's pass without colour).
 """
 from __future__ import annotations
 
@@ -11,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from sim import World, load_scenario
-from sim.camera import quiet_stdout, render
+from sim.camera import RENDERERS, decode_render, quiet_stdout, render
 
 with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
@@ -30,17 +33,26 @@ def _median_ms(fn, n: int) -> float:
 
 def bench_render(scenario: str, frames: int) -> dict:
     out = {}
-    for renderer in ("egl", "tiny"):
+    for renderer in RENDERERS:
         try:
             w = World(load_scenario(scenario), seed=0, renderer=renderer)
         except RuntimeError as e:
             out[renderer] = {"error": str(e)}
             continue
         T = w.ground_truth().T_world_camera
-        out[renderer] = {
-            "depth_color_ms": _median_ms(lambda: render(p, w._client, w.intrinsics, T, renderer, False), frames),
-            "depth_color_seg_ms": _median_ms(lambda: render(p, w._client, w.intrinsics, T, renderer, True), frames),
-        }
+        if renderer == "gl":
+            gl = w._gl
+            out[renderer] = {
+                "depth_color_ms": _median_ms(lambda: decode_render(*gl.render(T)), frames),
+                "depth_color_seg_ms": _median_ms(lambda: decode_render(*gl.render(T, segmentation=True)), frames),
+                "depth_only_ms": _median_ms(lambda: decode_render(*gl.render(T, color=False)), frames),
+                "triangles": gl.n_triangles}
+        else:
+            out[renderer] = {
+                "depth_color_ms": _median_ms(lambda: render(p, w._client, w.intrinsics, T, renderer, False), frames),
+                "depth_color_seg_ms": _median_ms(lambda: render(p, w._client, w.intrinsics, T, renderer, True),
+                                                 frames),
+                "depth_only_ms": None}
         w.close()
     return out
 
@@ -56,9 +68,9 @@ def bench_physics(scenario: str, steps: int) -> dict:
     return {"physics_step_us_median": float(np.median(ts) * 1e6), "physics_step_us_p95": float(np.percentile(ts, 95) * 1e6)}
 
 
-def bench_realtime(scenario: str, seconds: float, segmentation: bool) -> dict:
+def bench_realtime(scenario: str, seconds: float, segmentation: bool, renderer: str = "auto") -> dict:
     sc = load_scenario(scenario)
-    w = World(sc, seed=0, segmentation=segmentation)
+    w = World(sc, seed=0, segmentation=segmentation, renderer=renderer)
     ref_at = scenario_reference(sc)
     render0 = w.render_wall_time  # the start frame's render is not part of the loop
     n = int(round(seconds * sc.rates.control))
@@ -81,17 +93,27 @@ def run(scenario: str = "corridor", seconds: float = 10.0, frames: int = 30, jso
     cam = sc.camera
     res = {"scenario": scenario, "resolution": [cam.width, cam.height], "camera_hz": sc.rates.camera,
            "physics_hz": sc.rates.physics, "control_hz": sc.rates.control,
-           "render": bench_render(scenario, frames), "physics": bench_physics(scenario, 2400),
-           "realtime": [bench_realtime(scenario, seconds, False), bench_realtime(scenario, seconds, True)]}
+           "render": bench_render(scenario, frames), "physics": bench_physics(scenario, 2400)}
+    loops = [("gl", False), ("gl", True), ("pybullet", False)]
+    res["realtime"] = [bench_realtime(scenario, seconds, seg, r) for r, seg in loops
+                       if "error" not in res["render"].get(r, {"error": ""})]
+    from sim.gl_renderer import context_info
+
+    res["gl_context"] = context_info()
     print(f"Simulator benchmark: {scenario}, {cam.width}x{cam.height} @ {sc.rates.camera} Hz, "
           f"physics {sc.rates.physics} Hz, control {sc.rates.control} Hz")
     print("\nrender call, median ms/frame (the scenario's camera at the start pose)")
-    print(f"  {'renderer':<10}{'depth+color':>14}{'+segmentation':>16}")
+    print(f"  {'renderer':<10}{'depth+color':>14}{'+segmentation':>16}{'depth only':>13}")
     for r, v in res["render"].items():
         if "error" in v:
             print(f"  {r:<10}  unavailable: {v['error']}")
         else:
-            print(f"  {r:<10}{v['depth_color_ms']:>14.2f}{v['depth_color_seg_ms']:>16.2f}")
+            only = "-" if v["depth_only_ms"] is None else f"{v['depth_only_ms']:.2f}"
+            print(f"  {r:<10}{v['depth_color_ms']:>14.2f}{v['depth_color_seg_ms']:>16.2f}{only:>13}")
+    gi = res["gl_context"]
+    if gi:
+        print(f"  gl: {res['render']['gl'].get('triangles')} triangles; {gi['renderer']}, OpenGL {gi['version']}, "
+              f"LP_NUM_THREADS={gi['threads'] if gi['threads'] is not None else 'unset'}")
     ph = res["physics"]
     print(f"\nphysics step (rotor forces, stepSimulation, people at control rate, contacts): "
           f"median {ph['physics_step_us_median']:.1f} us, p95 {ph['physics_step_us_p95']:.1f} us")

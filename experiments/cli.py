@@ -18,7 +18,7 @@ from pathlib import Path
 from dodt.config import LearnedConfig
 from dodt.learned.model import ModelError
 from experiments.sequences import SequenceError
-from sim.scenario import ScenarioError, load_scenario, shipped_scenarios
+from sim.scenario import RENDERER_CHOICES, ScenarioError, load_scenario, shipped_scenarios
 
 
 class UserError(Exception):
@@ -156,7 +156,8 @@ def _cmd_bench(args) -> int:
         sc = load_scenario(args.scenario or "corridor")
         runs = []
         for _ in range(3):  # the same episode three times: the median real-time factor is quoted
-            runs.append(run_episode(sc, seed=0, perception=args.config, cfg=EpisodeConfig(duration=args.seconds)))
+            runs.append(run_episode(sc, seed=0, perception=args.config, cfg=EpisodeConfig(duration=args.seconds),
+                                    renderer=args.renderer))
         rtf = [s["timing"]["real_time_factor"] for s in runs]
         s = sorted(runs, key=lambda r: r["timing"]["real_time_factor"])[1]
         tm = s["timing"]
@@ -289,7 +290,7 @@ def _cmd_sweep(args) -> int:
         _writable_file(args.junit, "--junit")
     try:
         seeds = sweep.parse_seeds(args.seeds)
-        cfg = sweep.EpisodeConfig(static_map=args.map, frame_latency=args.frame_latency)
+        cfg = sweep.EpisodeConfig(static_map=args.map, frame_latency=args.frame_latency, renderer=args.renderer)
         agg = sweep.run_sweep(args.scenario, seeds, args.perception, Path(args.out), jobs=args.jobs,
                               dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet, cfg=cfg)
     except sweep.SweepError as e:
@@ -484,9 +485,15 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+RENDERER_HELP = ("the camera's renderer: gl (ours, OpenGL), pybullet (PyBullet's EGL plugin; egl is its older "
+                 "name), tiny (PyBullet's TinyRenderer), auto (the first that works, in that order); default: the "
+                 "scenario's")
+
+
 def _add_episode_options(parser: argparse.ArgumentParser) -> None:
-    """--map and --frame-latency for run and sweep (experiments.episode.STATIC_MAPS and EpisodeConfig; not
-    imported here: it loads the simulator)."""
+    """--map, --frame-latency and --renderer for run, sweep and bench loop (experiments.episode.STATIC_MAPS and
+    EpisodeConfig; not imported here: it loads the simulator)."""
+    parser.add_argument("--renderer", choices=RENDERER_CHOICES, default=None, help=RENDERER_HELP)
     parser.add_argument("--map", choices=("depth", "truth"), default="depth",
                         help="static map: depth (built from the camera, default) or truth (the scenario's geometry "
                              "known from the start; with the oracles or static-only nothing is rendered: a "
@@ -513,7 +520,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output folder")
     s.add_argument("--duration", type=_seconds, default=None, help="seconds to simulate (default: the scenario's)")
     s.add_argument("--save-every", type=_whole(1), default=1, help="write every k-th camera frame")
-    s.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
+    s.add_argument("--renderer", choices=RENDERER_CHOICES, default=None, help=RENDERER_HELP)
     s.add_argument("--no-segmentation", action="store_true", help="skip the segmentation images (faster)")
     s.add_argument("--format", choices=("dodt", "tum"), default="dodt",
                    help="dodt (default: depth/, color/, sensor.json) or tum (a TUM RGB-D sequence: rgb/, depth/, "
@@ -538,6 +545,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--config", default="dodt", help="runtime: the configuration; loop: the perception mode")
     b.add_argument("--frames", type=_whole(1, 100_000), default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
+    b.add_argument("--renderer", choices=RENDERER_CHOICES, default=None, help="loop: " + RENDERER_HELP)
     b.set_defaults(func=_cmd_bench)
 
     r = sub.add_parser("run", help="fly one closed-loop episode headless; write summary.json and the episode log")
@@ -546,7 +554,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, oracle-noisy, static-only, or a DODT preset")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--duration", type=_seconds, default=None, help="time limit in seconds (default: the scenario's)")
-    r.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None)
     _add_episode_options(r)
     r.add_argument("--viz", choices=("live", "html"), default=None,
                    help="live: stream to a meshcat server on 127.0.0.1; html: write OUT/replay.html")

@@ -138,12 +138,21 @@ def environment() -> dict:
     }
 
 
+# names episodes recorded for a renderer before it was renamed: the same renderer
+_RENDERER_ALIASES = {"egl": "pybullet"}
+
+
+def _value(env: dict, key: str):
+    v = env.get(key)
+    return _RENDERER_ALIASES.get(v, v) if key == "renderer" else v
+
+
 def fingerprint(env: dict | None) -> tuple | None:
     """What must agree for outcomes to agree (an episode adds its ``renderer``); None when ``env``
     is missing (results written before episodes recorded it)."""
     if not env:
         return None
-    return tuple((k, repr(env.get(k))) for k in FINGERPRINT_KEYS)
+    return tuple((k, repr(_value(env, k))) for k in FINGERPRINT_KEYS)
 
 
 def distinct(envs) -> list[dict]:
@@ -160,7 +169,7 @@ def differences(a: dict, b: dict) -> list[str]:
     """The fingerprint entries in which two environments differ, as 'what: A against B'."""
     out = []
     for key in FINGERPRINT_KEYS:
-        if key != "packages" and a.get(key) != b.get(key):
+        if key != "packages" and _value(a, key) != _value(b, key):
             out.append(f"{key} {a.get(key)} against {b.get(key)}")
     pa, pb = a.get("packages") or {}, b.get("packages") or {}
     for name in sorted(set(pa) | set(pb)):

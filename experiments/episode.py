@@ -62,6 +62,9 @@ class EpisodeConfig:
     seen_band: tuple[float, float] = (0.8, 1.6)  # m, world z: a ray crossing a floor cell at these heights saw
     # nobody there (planner.visibility.SeenSpace; a person's torso)
     launch_radius: float = 2.0  # m around the start that counts as seen free when the episode begins
+    # the camera's renderer (sim.camera: auto, gl, pybullet, tiny); None: the scenario's. Changes the images
+    # (gl and pybullet draw the same geometry, shaded differently), so outcomes are compared per renderer
+    renderer: str | None = None
 
 
 def map_config_for(scenario, robot_radius: float) -> MapConfig:
@@ -109,6 +112,8 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     on_frame(view): optional callback per camera frame (live viewers); view is a dict with t, frame
     (SensorFrame), truth (GroundTruth), perception (PerceptionOutput), map (VoxelMap), trajectory
     (the current plan or None), T_world_body (4x4), path (the planner's global path or None).
+    renderer: overrides ``cfg.renderer``. Frames carry colour only when the perception module reads it
+    (its ``uses_color``) or ``on_frame`` is given.
     """
     sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
     seed = sc.seed if seed is None else int(seed)
@@ -128,9 +133,10 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     # images are needed by a depth-built map or by a perception module that looks at them (unknown ones do)
     render = cfg.static_map == "depth" or bool(getattr(perc, "uses_images", True))
     world = None
+    color = sc.camera.color and (bool(getattr(perc, "uses_color", True)) or on_frame is not None)
     try:
-        world = World(sc, seed=seed, renderer=renderer, segmentation=False, render=render,
-                      frame_latency=cfg.frame_latency,
+        world = World(sc, seed=seed, renderer=renderer if renderer is not None else cfg.renderer,
+                      segmentation=False, render=render, frame_latency=cfg.frame_latency, color=color,
                       render_process=cfg.render_process and render and cfg.frame_latency > 0)
         planner = planner if planner is not None else default_planner(world.vehicle.radius)
         summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame)

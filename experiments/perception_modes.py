@@ -6,7 +6,9 @@ A perception module receives each sensor frame (and, only if it declares
 clear. To plug in another detector, implement ``reset`` and ``update`` and pass an instance to
 ``experiments.episode.run_episode(perception=...)``. A module that declares ``uses_images = False``
 reads no depth or colour; with a known static map (``EpisodeConfig.static_map = "truth"``) the
-simulator then renders nothing (a module without the attribute is taken to need images).
+simulator then renders nothing (a module without the attribute is taken to need images). One that
+declares ``uses_color = False`` reads no colour: its frames carry none, and the simulator's gl
+renderer draws depth only (a module without the attribute is taken to need colour).
 
 Modes:
 - ``dodt`` (and any DODT preset name, e.g. ``dodt-no-coast``): our DODT library on the frames.
@@ -77,6 +79,7 @@ class PerceptionModule(Protocol):
     name: str
     uses_ground_truth: bool
     uses_images: bool  # False: update() reads no depth or colour (with a known static map nothing is rendered)
+    uses_color: bool  # False: update() reads no colour (frames come without one)
 
     def reset(self) -> None: ...
 
@@ -123,6 +126,11 @@ class DODTPerception:
         # then checked against the static map (MovingTrackRule.on_structure)
         self.structure_test = None
         self._on_structure: set[int] = set()
+
+    @property
+    def uses_color(self) -> bool:
+        """Only the learned person detector looks at colour; DODT without it reads depth alone."""
+        return self.dodt.learned_detector is not None
 
     def reset(self) -> None:
         self.dodt.reset()
@@ -195,6 +203,7 @@ class DODTPerception:
 class OraclePerception:
     uses_ground_truth = True
     uses_images = False
+    uses_color = False
 
     def __init__(self, max_range: float = 5.0, memory: float = 1.0, all_around: bool = False,
                  accel_window: float | None = 0.1, velocity_noise: float = 0.0, noise_time: float = 0.5,
@@ -273,6 +282,7 @@ class StaticOnlyPerception:
     name = "static-only"
     uses_ground_truth = False
     uses_images = False  # the map looks at the depth, not this module
+    uses_color = False
 
     def reset(self) -> None:
         pass

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from dodt.frames import CameraIntrinsics
+from sim.scenario import RENDERER_CHOICES, RENDERERS  # noqa: F401 (RENDERERS: re-exported)
 
 # Optical frame (x right, y down, z forward) -> OpenGL camera frame (x right, y up, z back).
 _OPTICAL_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -25,11 +26,21 @@ NEAR_PLANE = 0.15  # m: sets the depth buffer's precision (EGL: 0.75 mm at 2.5 m
 FAR_PLANE = 30.0  # m
 
 
-# Where each renderer samples pixel (i, j), relative to its centre, in (u, v) pixels. EGL
-# (OpenGL) samples the centre. TinyRenderer samples half a pixel left of and below it:
-# measured by back-projecting a rendered box and the floor (tests/sim/test_camera.py), whose
+_ALIASES = {"egl": "pybullet"}
+
+
+def renderer_name(name: str) -> str:
+    """A renderer setting's canonical name ("egl" -> "pybullet"); ValueError naming the choices if unknown."""
+    if name not in RENDERER_CHOICES:
+        raise ValueError(f"renderer: {name!r} is not one of {', '.join(RENDERER_CHOICES)}")
+    return _ALIASES.get(name, name)
+
+
+# Where each renderer samples pixel (i, j), relative to its centre, in (u, v) pixels. OpenGL (ours
+# and PyBullet's EGL plugin) samples the centre. TinyRenderer samples half a pixel left of and below
+# it: measured by back-projecting a rendered box and the floor (tests/sim/test_camera.py), whose
 # residuals drop from 1.5-3 mm to 0.2 mm with this correction.
-PIXEL_SAMPLE_OFFSET = {"egl": (0.0, 0.0), "tiny": (-0.5, 0.5)}
+PIXEL_SAMPLE_OFFSET = {"gl": (0.0, 0.0), "pybullet": (0.0, 0.0), "egl": (0.0, 0.0), "tiny": (-0.5, 0.5)}
 
 
 def projection_matrix(K: CameraIntrinsics, near: float = NEAR_PLANE, far: float = FAR_PLANE,
@@ -102,20 +113,23 @@ def load_egl(p, client: int) -> bool:
 @dataclass
 class RenderOutput:
     depth: np.ndarray  # (H, W) float32 planar depth [m], 0 = no surface
-    color: np.ndarray  # (H, W, 3) uint8 RGB
+    color: np.ndarray | None  # (H, W, 3) uint8 RGB; None from a depth-only render
     segmentation: np.ndarray | None  # (H, W) int32 PyBullet body ids, -1 = background
 
 
 def render_buffers(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarray, renderer: str,
                    segmentation: bool, light_direction=None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The renderer's raw buffers: RGBA (H, W, 4) uint8, the depth buffer (H, W) float32 in
-    [0, 1], PyBullet body ids (H, W) int32 or None. ``decode_render`` turns them into images.
+    """PyBullet's renderers' raw buffers ("pybullet"/"egl" or "tiny"): RGBA (H, W, 4) uint8, the depth
+    buffer (H, W) float32 in [0, 1], PyBullet body ids (H, W) int32 or None. ``decode_render`` turns
+    them into images (sim.gl_renderer gives the same buffers for "gl").
 
     light_direction: optional (3,) world vector for PyBullet's light (both renderers honour
     it; EGL keeps the last one given for later frames of the client, so pass it every frame or
     never). Colour, ambient, diffuse and specular light settings have no effect under EGL."""
     flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
-    r = p.ER_BULLET_HARDWARE_OPENGL if renderer == "egl" else p.ER_TINY_RENDERER
+    if renderer not in ("pybullet", "egl", "tiny"):
+        raise ValueError(f"render_buffers: renderer {renderer!r} is not one of PyBullet's (pybullet, tiny)")
+    r = p.ER_TINY_RENDERER if renderer == "tiny" else p.ER_BULLET_HARDWARE_OPENGL
     light = {} if light_direction is None else {"lightDirection": [float(x) for x in light_direction]}
     with quiet_stdout():  # the EGL plugin prints on its first frame
         w, h, rgba, depth, seg = p.getCameraImage(
@@ -126,8 +140,9 @@ def render_buffers(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarr
             np.asarray(seg, dtype=np.int32).reshape(h, w) if segmentation else None)
 
 
-def decode_render(rgba: np.ndarray, zbuf: np.ndarray, seg: np.ndarray | None) -> RenderOutput:
-    return RenderOutput(depth=linearize_depth(zbuf), color=cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB), segmentation=seg)
+def decode_render(rgba: np.ndarray | None, zbuf: np.ndarray, seg: np.ndarray | None) -> RenderOutput:
+    color = None if rgba is None else cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB)
+    return RenderOutput(depth=linearize_depth(zbuf), color=color, segmentation=seg)
 
 
 def render(p, client: int, K: CameraIntrinsics, T_world_camera: np.ndarray, renderer: str,

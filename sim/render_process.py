@@ -1,10 +1,12 @@
 """Camera rendering in a second process, so that it runs beside the rest of a closed loop.
 
 The child builds its own copy of the world from the same scenario and seed (same bodies, same
-colours) and renders nothing but what it is asked: for each captured frame the parent sends the
-drone's pose and the people's poses, the child poses its bodies so, renders, and sends the
-renderer's raw buffers back over a socket. Requests are answered in order; the parent decodes the buffers and draws the depth noise from its own stream in capture
-order, so the frames are bit-identical to rendering in the parent (tested).
+colours, the same depth-noise stream) and renders nothing but what it is asked: for each captured
+frame the parent sends the drone's pose and the people's poses, the child poses its bodies so,
+renders, adds the depth noise and sends the frame's images back over a socket (depth in mm,
+colour, obstacle ids). Requests are answered in order, so the child draws the noise frame after
+frame in capture order, as the parent would: the frames are bit-identical to rendering in the
+parent (tested), and the parent spends no time on noise.
 
 It pays off only when the parent has something to do while the child renders: the World asks for
 this with ``frame_latency >= 1`` (a frame is delivered one or more camera periods after its
@@ -16,7 +18,6 @@ import os
 import socket
 import subprocess
 import sys
-import time
 import traceback
 from multiprocessing.connection import Connection
 
@@ -30,12 +31,12 @@ class RenderProcessError(RuntimeError):
     """The render process failed or stopped answering."""
 
 
-def _serve(conn, scenario, seed, renderer, segmentation, light_direction) -> None:
+def _serve(conn, scenario, seed, renderer, segmentation, light_direction, color) -> None:
     from sim.world import World  # in the child only
 
     try:
         world = World(scenario, seed=seed, renderer=renderer, segmentation=segmentation,
-                      light_direction=light_direction)
+                      light_direction=light_direction, color=color)
     except Exception as e:  # noqa: BLE001 - reported to the parent, which raises it
         conn.send(("error", f"{type(e).__name__}: {e}"))
         return
@@ -43,20 +44,20 @@ def _serve(conn, scenario, seed, renderer, segmentation, light_direction) -> Non
     # The frame reset() rendered (t = 0, the start pose) answers frame 0: the EGL renderer's first frames are
     # not all alike (the same pose's colour differed between a first and a later render), so the child renders
     # exactly the frames the parent would, in the same order.
-    first = world.last_buffers
+    first = world.last_images
     try:
         while True:
             msg = conn.recv()
             if msg is None:
                 break
             seq, t, pos, quat, people, light = msg
-            t0 = time.perf_counter()
+            r0 = world.render_wall_time  # the renderer's share (benchmarks), without the noise
             if seq == 0 and first is not None:
                 images, first = first, None
             else:
                 world.light_direction = light
-                images = world.render_at(pos, quat, people)
-            render_s = time.perf_counter() - t0
+                images = world.images_at(pos, quat, people)
+            render_s = world.render_wall_time - r0
             conn.send(("frame", seq, render_s, [None if a is None else (a.dtype.str, a.shape) for a in images]))
             for a in images:
                 if a is not None:
@@ -75,7 +76,8 @@ def _serve(conn, scenario, seed, renderer, segmentation, light_direction) -> Non
 class RenderProcess:
     """Parent side: ``submit`` frames in capture order, ``result`` them in the same order."""
 
-    def __init__(self, scenario, seed: int, renderer: str, segmentation: bool, light_direction=None):
+    def __init__(self, scenario, seed: int, renderer: str, segmentation: bool, light_direction=None,
+                 color: bool = True):
         # A fresh interpreter (no PyBullet/EGL or thread state copied from us, and, unlike
         # multiprocessing's spawn, no re-import of the user's main script) on one end of a socket pair.
         ours, theirs = socket.socketpair()
@@ -92,7 +94,7 @@ class RenderProcess:
         self._outstanding: list[int] = []
         self.render_wall_time = 0.0
         try:
-            self._conn.send((scenario, seed, renderer, segmentation, light_direction))
+            self._conn.send((scenario, seed, renderer, segmentation, light_direction, color))
             kind, value = self._recv(_START_TIMEOUT_S, "starting")
         except BaseException:  # no answer in time, the child gone, Ctrl-C: a child still building is ended now
             self._proc.kill()
@@ -125,8 +127,8 @@ class RenderProcess:
         self._outstanding.append(seq)
 
     def result(self, seq: int) -> tuple[np.ndarray | None, ...]:
-        """The renderer's buffers for frame ``seq`` (``World.render_at``): RGBA, depth buffer,
-        PyBullet body ids or None."""
+        """The images of frame ``seq`` (``World.images_at``): depth in mm with the depth noise, colour or
+        None, obstacle ids or None."""
         if not self._outstanding or self._outstanding[0] != seq:
             raise RenderProcessError(f"frame {seq} asked out of order (outstanding: {self._outstanding[:3]})")
         kind, (got, render_s, layout) = self._recv(_REPLY_TIMEOUT_S, f"rendering frame {seq}")

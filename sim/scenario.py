@@ -137,6 +137,13 @@ class Drone:
     cruise_speed: float = 1.0  # m/s along the straight demo reference
 
 
+# The renderers: "gl", ours (sim.gl_renderer: OpenGL through moderngl on EGL); "pybullet", PyBullet's
+# EGL renderer plugin; "tiny", PyBullet's TinyRenderer (software, no EGL needed). "auto" takes the first
+# of these that works here. "egl" is the older name of "pybullet".
+RENDERERS = ("gl", "pybullet", "tiny")
+RENDERER_CHOICES = ("auto",) + RENDERERS + ("egl",)
+
+
 @dataclass(frozen=True)
 class Camera:
     """RealSense D435i depth stream as configured by the DODT authors (see dodt.frames)."""
@@ -154,7 +161,7 @@ class Camera:
     mount_xyz: tuple[float, float, float] = (0.065, 0.01, 0.12)
     mount_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
     color: bool = True
-    renderer: str = "auto"  # auto | egl | tiny
+    renderer: str = "auto"  # auto | gl | pybullet | tiny (sim.camera.RENDERERS; egl = pybullet)
 
 
 @dataclass(frozen=True)
@@ -727,7 +734,7 @@ def _read_camera(s: _Section) -> Camera:
                mount_rpy=tuple(math.radians(a) for a in s.vector("mount_rpy_deg", 3, (0.0, 0.0, 0.0),
                                                                  bound=MAX_ANGLE_DEG, what="angles [deg]")),
                color=s.boolean("color", True),
-               renderer=s.string("renderer", "auto", choices=("auto", "egl", "tiny")))
+               renderer=s.string("renderer", "auto", choices=RENDERER_CHOICES))
     if c.max_range <= c.min_range:
         s.fail(s.key("max_range"), f"must exceed min_range ({c.min_range}), got {c.max_range}")
     s.done()

@@ -32,7 +32,7 @@ with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
 
 from dodt.frames import CameraIntrinsics, SensorFrame
-from sim.camera import decode_render, load_egl, render_buffers
+from sim.camera import decode_render, load_egl, render_buffers, renderer_name
 from sim.controller import CascadedController, DroneState, Reference
 from sim.crowd import Crowd
 from sim.depth_noise import DepthNoiseModel
@@ -88,7 +88,7 @@ class World:
     def __init__(self, scenario: Scenario, seed: int | None = None, renderer: str | None = None,
                  segmentation: bool | None = None, camera: bool = True,
                  light_direction: tuple[float, float, float] | None = None, render: bool = True,
-                 frame_latency: int = 0, render_process: bool = False):
+                 frame_latency: int = 0, render_process: bool = False, color: bool | None = None):
         """camera=False skips rendering (frames and truth stay at their initial values); for
         control and planning experiments that need no images. render=False keeps the camera's
         clock but draws nothing: every camera period still gives a frame (pose, intrinsics, stamp,
@@ -102,7 +102,11 @@ class World:
         returns it, ``latest_frame`` holds it; its stamp, pose and truth stay those of the
         capture). 0: delivered at once. render_process (needs frame_latency >= 1 and render):
         render in a second process (sim.render_process) while this one goes on; frames and
-        truth are bit-identical to rendering here with the same latency."""
+        truth are bit-identical to rendering here with the same latency.
+
+        renderer: "auto" (default: the scenario's), "gl", "pybullet" ("egl") or "tiny" (sim.camera).
+        color: whether frames carry a colour image (default: the scenario's ``camera.color``); without
+        one the gl renderer draws depth only."""
         if int(frame_latency) != frame_latency or frame_latency < 0:
             raise ValueError(f"frame_latency: must be a whole number of camera periods >= 0, got {frame_latency!r}")
         if render_process and not (render and camera and frame_latency >= 1):
@@ -111,13 +115,15 @@ class World:
         self.frame_latency = int(frame_latency)
         self.render_process = bool(render_process)
         self._render_proc = None
+        self._gl = None  # sim.gl_renderer.GLRenderer when renderer is "gl"
         self.light_direction = light_direction
         self.camera_on = camera
         self.render_on = bool(render)
         self.seed = scenario.seed if seed is None else int(seed)
         self._template = scenario  # a scenario with ranges is drawn anew for every seed (Scenario.for_seed)
         self.scenario = scenario = scenario.for_seed(self.seed)
-        self.requested_renderer = renderer or scenario.camera.renderer
+        self.requested_renderer = renderer_name(renderer or scenario.camera.renderer)
+        self.color_on = scenario.camera.color if color is None else bool(color)
         self.segmentation_on = scenario.segmentation if segmentation is None else segmentation
         self.vehicle = load_vehicle()
         cam = scenario.camera
@@ -159,28 +165,41 @@ class World:
             self._query_client = p.connect(p.DIRECT)
         c = self._client
         self.renderer = "tiny" if self.render_on else "none"
+        want = self.requested_renderer
+        use_gl = False
         if self.render_process:
             from sim.render_process import RenderProcess
 
-            self._render_proc = RenderProcess(sc, self.seed, self.requested_renderer, self.segmentation_on,
-                                              self.light_direction)
+            self._render_proc = RenderProcess(sc, self.seed, want, self.segmentation_on, self.light_direction,
+                                              self.color_on)
             self.renderer = f"{self._render_proc.renderer} (render process)"
-        elif self.render_on and self.requested_renderer in ("auto", "egl"):
+        elif self.render_on and want in ("auto", "gl"):
+            from sim.gl_renderer import GLUnavailable, shared_context
+
+            try:
+                shared_context()  # made once per process, before any body: PyBullet's EGL plugin is the fallback
+                use_gl = True
+            except GLUnavailable as e:
+                if want == "gl":
+                    raise RuntimeError(f"renderer 'gl' requested but {e}; use renderer = 'auto', 'pybullet' or "
+                                       f"'tiny'") from None
+        if not use_gl and not self.render_process and self.render_on and want in ("auto", "pybullet"):
             global _egl_owner
             other = _egl_owner() if _egl_owner is not None else None
             if other is not None and other is not self:
                 # PyBullet's EGL plugin keeps global state: with two EGL clients in a process,
                 # closing one crashes the other (measured). One World at a time gets EGL.
-                if self.requested_renderer == "egl":
-                    raise RuntimeError("another World in this process already renders with EGL; close it first "
-                                       "(world.close() or a with-block) or use renderer='tiny'")
+                if want == "pybullet":
+                    raise RuntimeError("another World in this process already renders with PyBullet's EGL plugin; "
+                                       "close it first (world.close() or a with-block) or use renderer='gl' or "
+                                       "'tiny'")
                 warnings.warn("another World in this process renders with EGL: this one uses TinyRenderer "
                               "(close the other World first to get EGL)", stacklevel=2)
             elif load_egl(p, c):
-                self.renderer = "egl"
+                self.renderer = "pybullet"
                 _egl_owner = weakref.ref(self)
-            elif self.requested_renderer == "egl":
-                raise RuntimeError("renderer 'egl' requested but PyBullet's EGL plugin did not load "
+            elif want == "pybullet":
+                raise RuntimeError("renderer 'pybullet' requested but PyBullet's EGL plugin did not load "
                                    "(is Mesa's libEGL installed?); use renderer = 'auto' or 'tiny'")
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=c)
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=self._query_client)
@@ -203,6 +222,8 @@ class World:
         h = self.vehicle.collision_size / 2
         self.crowd = Crowd(self.walkers, sc, drone_radius=float(math.hypot(h[0], h[1])))
         self._build_drone()
+        if use_gl:
+            self._make_gl_renderer(want)
 
         # Segmentation: PyBullet body uid -> obstacle id.
         n = max([b.uid for b in self.static_bodies] + [c for w in self.walkers for _, c in w.bodies[:1]]
@@ -227,7 +248,7 @@ class World:
         self._render_wall_time = 0.0  # s spent inside the renderer (for benchmarks)
         self._truth: GroundTruth | None = None
         self._pending: list[_Capture] = []  # captured frames not yet delivered (frame_latency)
-        self.last_buffers = None  # the renderer's raw buffers of the last frame rendered in this process
+        self.last_images = None  # (depth mm, colour, segmentation) of the last frame rendered in this process
         self._last_reference: Reference | None = None
         self._camera_path = self._make_camera_path()
         self._rotor_speed = np.full(4, math.sqrt(self.vehicle.mass * GRAVITY / (4 * self.vehicle.kf)))
@@ -250,10 +271,27 @@ class World:
         self._capture()
         return self._frame
 
+    def _make_gl_renderer(self, want: str) -> None:
+        """Our OpenGL renderer over the bodies just built (sim.gl_renderer)."""
+        from sim.gl_renderer import GLRenderer, GLUnsupportedScene
+
+        try:
+            self._gl = GLRenderer(p, self._client, self.intrinsics)
+        except GLUnsupportedScene as e:
+            if want == "gl":
+                raise RuntimeError(f"renderer 'gl': {e}") from None
+            warnings.warn(f"the gl renderer cannot draw this scene ({e}): using TinyRenderer", stacklevel=3)
+            return
+        self.renderer = "gl"
+
     def close(self) -> None:
         global _egl_owner
         if _egl_owner is not None and _egl_owner() is self:
             _egl_owner = None
+        gl = getattr(self, "_gl", None)
+        if gl is not None:
+            gl.release()
+            self._gl = None
         for cid in (self._client, self._query_client):
             if cid is not None:
                 try:
@@ -635,10 +673,13 @@ class World:
 
     def _render_buffers(self, T_true: np.ndarray):
         t0 = time.perf_counter()  # benchmark bookkeeping only: no result depends on it
-        out = render_buffers(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
-                             light_direction=self.light_direction)
+        if self._gl is not None:
+            out = self._gl.render(T_true, color=self.color_on, segmentation=self.segmentation_on,
+                                  light_direction=self.light_direction)
+        else:
+            out = render_buffers(p, self._client, self.intrinsics, T_true, self.renderer, self.segmentation_on,
+                                 light_direction=self.light_direction)
         self._render_wall_time += time.perf_counter() - t0
-        self.last_buffers = out
         return out
 
     def _finish_images(self, rgba: np.ndarray, zbuf: np.ndarray, seg_ids: np.ndarray | None):
@@ -652,12 +693,13 @@ class World:
         z *= np.float32(1000.0)
         z += np.float32(0.5)  # round to the nearest millimetre on the cast
         depth_mm = z.astype(np.uint16)
-        color = out.color if cam.color else None
+        color = out.color if self.color_on else None
         seg = None
         if out.segmentation is not None:
             s = out.segmentation
             s = np.where((s >= -1) & (s + 1 < len(self._seg_lut)), s, -1)
             seg = self._seg_lut[s + 1]
+        self.last_images = (depth_mm, color, seg)
         return depth_mm, color, seg
 
     def people_poses(self) -> list:
@@ -670,11 +712,17 @@ class World:
 
     def render_at(self, pos, quat, people) -> tuple:
         """Pose the drone at (pos, quat) and the people at their ``people_poses`` and render: the
-        renderer's raw buffers (the render process's entry; nothing is stepped, no noise is drawn)."""
+        renderer's raw buffers (nothing is stepped, no noise is drawn)."""
         p.resetBasePositionAndOrientation(self.drone, list(pos), list(quat), physicsClientId=self._client)
         for w, pose in zip(self.walkers, people):
             w.apply_pose(p, pose)
         return self._render_buffers(self._T_from_pose(pos, quat) @ self.T_body_camera)
+
+    def images_at(self, pos, quat, people) -> tuple:
+        """``render_at``, then the frame's images as a capture makes them: (depth in mm with the depth
+        noise, colour or None, obstacle ids or None). The render process's entry: it draws the noise from
+        its own copy of this world's noise stream, frame after frame in capture order, as one process would."""
+        return self._finish_images(*self.render_at(pos, quat, people))
 
     def _capture(self) -> SensorFrame | None:
         """Capture a frame now; deliver (and return) the one captured ``frame_latency`` camera
@@ -696,8 +744,8 @@ class World:
         while self._pending and self._pending[0].seq <= seq - self.frame_latency:
             c = self._pending.pop(0)
             images = c.images
-            if images is None:  # rendered beside us; the noise is drawn here, in capture order as in one process
-                images = self._finish_images(*self._render_proc.result(c.seq))
+            if images is None:  # rendered beside us, the noise drawn there (in capture order, as in one process)
+                images = self._render_proc.result(c.seq)
             depth_mm, color, seg = images
             self._frame = SensorFrame(depth=depth_mm, color=color, intrinsics=self.intrinsics,
                                       T_world_camera=c.T_odom, stamp=c.stamp, seq=c.seq)

@@ -40,7 +40,13 @@ def egl_available() -> bool:
             p.disconnect(c)
 
 
-RENDERERS = ["tiny"] + (["egl"] if egl_available() else [])
+def gl_available() -> bool:
+    from sim.gl_renderer import gl_available as available
+
+    return available()
+
+
+RENDERERS = ["tiny"] + (["pybullet"] if egl_available() else []) + (["gl"] if gl_available() else [])
 
 
 def rng(seed=0):

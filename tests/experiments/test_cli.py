@@ -68,3 +68,21 @@ def test_reproduce_options_reach_the_report(monkeypatch, tmp_path):
     monkeypatch.setattr(experiments.reproduce, "reproduce", lambda out, quick, jobs: calls.append((out, quick, jobs)))
     assert main(["reproduce", "--out", str(tmp_path / "rep"), "--quick", "--jobs", "1"]) == 0
     assert calls == [(tmp_path / "rep", True, 1)]
+
+
+@pytest.mark.parametrize("renderer", ["gl", "pybullet", "egl", "tiny", None])
+def test_sweep_renderer_option_reaches_every_episode(monkeypatch, tmp_path, renderer):
+    """sweep --renderer sets EpisodeConfig.renderer, which every episode (in any worker) builds its world with."""
+    from experiments import sweep
+    from experiments.cli import main
+
+    seen = []
+
+    def fake(scenario, seeds, perception, out, jobs, dask_address, keep_logs, progress, cfg):
+        seen.append(cfg.renderer)
+        return sweep.aggregate([], scenario, perception)
+
+    monkeypatch.setattr(sweep, "run_sweep", fake)
+    args = ["sweep", "corridor", "--seeds", "0:2", "--out", str(tmp_path)] + (["--renderer", renderer] if renderer else [])
+    assert main(args) == 0
+    assert seen == [renderer]

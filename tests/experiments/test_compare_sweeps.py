@@ -153,3 +153,14 @@ def test_the_environment_record_names_versions_processor_and_overrides(monkeypat
     assert fingerprint(plain) != fingerprint(env)
     assert differences(plain, env) == [f"overrides {plain['overrides']} against {env['overrides']}"]
     json.dumps(env)  # it goes into summary.json
+
+
+def test_the_renderers_older_name_is_the_same_renderer():
+    """Episodes recorded PyBullet's EGL plugin as "egl" before it was named "pybullet": the same renderer, so
+    no difference; our gl renderer is another."""
+    from experiments.environment import differences, fingerprint
+
+    new = {**ENV, "renderer": "pybullet"}
+    assert fingerprint(ENV) == fingerprint(new) and differences(ENV, new) == []
+    gl = {**ENV, "renderer": "gl"}
+    assert differences(ENV, gl) == ["renderer egl against gl"]

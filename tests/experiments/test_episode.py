@@ -96,7 +96,7 @@ def test_same_seed_gives_the_same_episode():
     assert a == b
     # each summary says what computed it, since outcomes agree only within one environment
     env = a["environment"]
-    assert env["packages"]["numpy"] == np.__version__ and env["renderer"] in ("egl", "tiny")
+    assert env["packages"]["numpy"] == np.__version__ and env["renderer"] in ("gl", "pybullet", "tiny")
     assert env["cpu"] and env["python"].count(".") == 2
 
 
@@ -152,3 +152,41 @@ def test_known_static_map_renders_nothing_and_holds_the_geometry(tmp_path):
     assert d["timing"]["renderer"] != "none"
     with pytest.raises(ValueError, match="static_map"):
         run_episode(sc, seed=0, perception="oracle", cfg=EpisodeConfig(duration=0.5, static_map="lidar"))
+
+
+class _Looking(_Blind):
+    """Records whether its frames carried colour; ``uses_color`` as given."""
+
+    def __init__(self, uses_color):
+        self.uses_color = uses_color
+        self.colors = []
+
+    def update(self, frame, truth=None):
+        self.colors.append(frame.color is not None)
+        return super().update(frame, truth)
+
+
+@pytest.mark.parametrize("renderer", ["gl", "tiny"])
+def test_frames_carry_colour_only_for_a_perception_that_reads_it(renderer):
+    """A module declaring uses_color = False gets depth-only frames (the gl renderer then skips colour); one
+    that reads colour, or does not say, gets it. EpisodeConfig.renderer picks the renderer."""
+    from conftest import RENDERERS
+
+    if renderer not in RENDERERS:
+        pytest.skip(f"{renderer} not available here")
+    cfg = EpisodeConfig(duration=0.3, renderer=renderer, render_process=False)
+    for uses_color in (False, True):
+        perc = _Looking(uses_color)
+        s = run_episode(make_scenario(), seed=0, perception=perc, cfg=cfg)
+        assert s["environment"]["renderer"] == renderer
+        assert len(perc.colors) >= 8 and set(perc.colors) == {uses_color}
+    silent = _Looking(True)
+    del silent.uses_color  # says nothing: taken to read colour
+    run_episode(make_scenario(), seed=0, perception=silent, cfg=cfg)
+    assert all(silent.colors)
+    watched = _Looking(False)  # a viewer (on_frame) may show the colour
+    run_episode(make_scenario(), seed=0, perception=watched, cfg=cfg, on_frame=lambda view: None)
+    assert all(watched.colors)
+    from experiments.perception_modes import make_perception
+
+    assert make_perception("dodt").uses_color is False and make_perception("oracle").uses_color is False

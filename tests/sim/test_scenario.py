@@ -361,7 +361,7 @@ def test_person_height_band_is_inclusive(height):
         ({"obstacles[0].kind": "cube"}, "obstacles[0].kind", "must be one of box, pillar, shelf, wall; got 'cube'"),
         ({"people[0].behaviour": "run"}, "people[0].behaviour",
          "must be one of waypoint_loop, back_and_forth, crossing, random_walk, circle; got 'run'"),
-        ({"camera.renderer": "opengl"}, "camera.renderer", "must be one of auto, egl, tiny; got 'opengl'"),
+        ({"camera.renderer": "opengl"}, "camera.renderer", "must be one of auto, gl, pybullet, tiny, egl; got 'opengl'"),
         ({"noise.axial_model": "gauss"}, "noise.axial_model", "must be one of intel_rms, nguyen, none; got 'gauss'"),
         ({"camera_path.keyframes": KEYFRAMES, "camera_path.mode": "drive"}, "camera_path.mode",
          "must be one of carried, flown; got 'drive'"),
