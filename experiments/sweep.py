@@ -12,7 +12,6 @@ optionally JUnit XML with one test case per seed.
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import sys
@@ -64,15 +63,14 @@ def parse_seeds(text: str) -> list[int]:
 
 
 
-def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval of a proportion k/n."""
+def wilson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a proportion k/n (scipy.stats.binomtest); no trials: (0, 1)."""
     if n == 0:
         return (0.0, 1.0)
-    ph = k / n
-    den = 1 + z * z / n
-    mid = (ph + z * z / (2 * n)) / den
-    half = z * math.sqrt(ph * (1 - ph) / n + z * z / (4 * n * n)) / den
-    return (max(0.0, mid - half), min(1.0, mid + half))
+    from scipy.stats import binomtest
+
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return (max(0.0, float(ci.low)), min(1.0, float(ci.high)))
 
 
 def run_one(scenario, seed: int, perception: str, episodes_dir: str, keep_log: bool,
