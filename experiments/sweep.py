@@ -118,27 +118,24 @@ def _append(path: Path, summary: dict) -> None:
 
 
 class _Progress:
-    def __init__(self, total: int, done: int, stream=sys.stderr):
-        self.total, self.done, self.stream = total, done, stream
-        self.t0 = time.perf_counter()
-        self.new = 0
+    """The progress bar of a sweep or benchmark (tqdm): episodes done of all, failures, time left. It writes
+    nothing unless ``stream`` is a terminal (a log file or a CI job gets no bar)."""
+
+    def __init__(self, total: int, done: int, stream=None):
+        from tqdm import tqdm
+
+        stream = sys.stderr if stream is None else stream
         self.failures = 0
+        self.bar = tqdm(total=total, initial=done, unit="episode", file=stream, dynamic_ncols=True,
+                        disable=not (hasattr(stream, "isatty") and stream.isatty()))
 
     def tick(self, s: dict) -> None:
-        self.done += 1
-        self.new += 1
         self.failures += not s["success"]
-        el = time.perf_counter() - self.t0
-        eta = el / self.new * (self.total - self.done)
-        w = 30
-        fill = int(w * self.done / max(self.total, 1))
-        self.stream.write(f"\r[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total} episodes, "
-                          f"{self.failures} failed, {el:.0f} s elapsed, ~{eta:.0f} s left ")
-        self.stream.flush()
+        self.bar.set_postfix_str(f"{self.failures} failed", refresh=False)
+        self.bar.update(1)
 
     def close(self) -> None:
-        self.stream.write("\n")
-        self.stream.flush()
+        self.bar.close()
 
 
 def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs: int = 1,
