@@ -13,6 +13,7 @@ per family. Collisions are classed by experiments.fault.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import time
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ import numpy as np
 
 from experiments.environment import distinct
 from experiments.sweep import (RESULTS, SweepError, _append, _dist, _end_with_newline, _Progress, aggregate,
-                               describe_environment, read_results, run_tasks)
+                               check_same_setup, describe_environment, read_results, run_tasks)
 
 FAMILIES = ("corridor", "corridor4", "crossing", "head_on", "step_out", "overtaking", "static_clutter")
 MODES = ("dodt", "oracle", "static-only")
@@ -40,7 +41,8 @@ class Cell:
 
     @property
     def folder(self) -> str:
-        return f"{self.family}/{self.people}/{self.perception}"
+        # a plug-in's module:Class spec becomes a name a folder may have
+        return f"{self.family}/{self.people}/{re.sub(r'[^A-Za-z0-9_.+-]', '_', self.perception)}"
 
 
 def split_seeds(split: str, count: int) -> list[int]:
@@ -59,11 +61,15 @@ def _scenario(family: str, people: str):
 
 
 def run_benchmark(out: Path, split: str, count: int, families=FAMILIES, modes=MODES, people=tuple(PEOPLE),
-                  jobs: int = 1, dask_address: str | None = None, cfg=None, progress: bool = True) -> dict:
-    """Run what is missing of the benchmark into ``out``; write and return the report."""
+                  jobs: int = 1, dask_address: str | None = None, cfg=None, progress: bool = True,
+                  settings=None, planner: str | None = None) -> dict:
+    """Run what is missing of the benchmark into ``out``; write and return the report. settings: configuration
+    overrides (experiments.config); planner: a ``module:Class`` spec, None for the default planner."""
+    from experiments.config import Settings
     from experiments.episode import EpisodeConfig
 
-    cfg = cfg or EpisodeConfig()
+    settings = settings or Settings()
+    cfg = settings.episode_config(cfg or EpisodeConfig())
     seeds = split_seeds(split, count)
     out = Path(out)
     cells, scenarios = [], {}
@@ -87,11 +93,13 @@ def run_benchmark(out: Path, split: str, count: int, families=FAMILIES, modes=MO
         if wrong:
             raise SweepError(f"{folder}: holds results of another configuration (perception, static map or frame "
                              f"latency); use another --out folder")
+        check_same_setup(folder / RESULTS, done[c].values(), settings, planner)
     if jobs > 1 or dask_address:
         from dataclasses import replace
 
         cfg = replace(cfg, render_process=False)  # the cores are busy with episodes already
-    tasks = [(c, (scenarios[(c.family, c.people)], seed, c.perception, str(out / c.folder / "episodes"), False, cfg))
+    tasks = [(c, (scenarios[(c.family, c.people)], seed, c.perception, str(out / c.folder / "episodes"), False, cfg,
+                  settings, planner))
              for seed in seeds for c in cells if seed not in done[c]]
     total = len(seeds) * len(cells)
     bar = _Progress(total, total - len(tasks)) if progress and tasks else None
@@ -107,6 +115,10 @@ def run_benchmark(out: Path, split: str, count: int, families=FAMILIES, modes=MO
     if bar:
         bar.close()
     report = build_report(out, split, seeds, cells, done)
+    if planner is not None:
+        report["planner"] = planner
+    if settings:
+        report["config"] = {"set": settings.assignments()}
     report["wall_s_this_run"] = round(time.perf_counter() - t0, 1)
     (out / "report.json").write_text(json.dumps(report, indent=1))
     (out / "report.md").write_text(markdown(report))
@@ -151,7 +163,10 @@ def markdown(report: dict) -> str:
          f"Commit {report.get('commit') or 'unknown'}. Rates in % of episodes with 95 % Wilson intervals; "
          "collisions classed by fault (experiments.fault): at fault = the drone moved into a person or touched "
          "structure; not at fault only = hit while at rest or from behind while moving away. "
-         "People: blind = they do not see the drone, aware = they see it and give way.", "",
+         "People: blind = they do not see the drone, aware = they see it and give way."
+         + (f" Planner: {report['planner']}." if report.get("planner") else "")
+         + (" Configuration overrides: " + ", ".join(f"{k}={v}" for k, v in report["config"]["set"].items()) + "."
+            if report.get("config") else ""), "",
          "| family | people | perception | n | success | at-fault collision | only not-at-fault collisions | "
          "timeout | median time to goal [s] | closest to a person, p5 / median [m] |",
          "|---|---|---|---|---|---|---|---|---|---|"]

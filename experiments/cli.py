@@ -188,17 +188,66 @@ def _parse_rates(text: str) -> list[float]:
 
 
 def _check_perception(mode: str) -> None:
-    from experiments.perception_modes import known_modes
+    """A built-in mode or a plug-in's module:Class that loads and implements the protocol."""
+    from experiments.plugins import PluginError, check_perception
 
-    if mode not in known_modes():
-        raise UserError(f"--perception: unknown mode {mode!r}; known: {', '.join(known_modes())}")
+    try:
+        check_perception(mode)
+    except PluginError as e:
+        raise UserError(f"--perception: {e}") from None
+
+
+def _check_planner(spec: str) -> str | None:
+    """The --planner spec for the episodes: None for the built-in default."""
+    from experiments.plugins import DEFAULT_PLANNER, PluginError, check_planner
+
+    try:
+        check_planner(spec)
+    except PluginError as e:
+        raise UserError(f"--planner: {e}") from None
+    return None if spec == DEFAULT_PLANNER else spec
+
+
+def _settings(args):
+    """The overrides of --config and --set (experiments.config), checked now."""
+    from experiments.config import ConfigError, build
+
+    try:
+        return build(args.config, args.set or ())
+    except ConfigError as e:
+        raise UserError(str(e)) from None
+
+
+# episode options and the episode.* keys they stand for: giving both is refused (which one would win?)
+_EPISODE_OPTIONS = {"static_map": "--map", "frame_latency": "--frame-latency", "renderer": "--renderer",
+                    "duration": "--duration"}
+
+
+def _episode_config(args, settings, **given):
+    """The episodes' EpisodeConfig: the episode options (and ``given``, values a command decided), then the
+    settings' episode section; an option given on the command line and also set as a key is refused."""
+    from experiments.episode import EpisodeConfig
+
+    keys = {k for k, _ in settings.episode}
+    values = {}
+    for field, option in _EPISODE_OPTIONS.items():
+        v = given.get(field, getattr(args, option[2:].replace("-", "_"), None))
+        if v is None:
+            continue
+        if field in keys:
+            raise UserError(f"{option} and episode.{field} (--config/--set) both given; use one")
+        values[field] = v
+    return settings.episode_config(EpisodeConfig(**values))
 
 
 def _cmd_run(args) -> int:
-    from experiments.episode import EpisodeConfig, run_episode
+    from experiments.episode import run_episode
 
     sc = load_scenario(args.scenario)
     _check_perception(args.perception)
+    planner = _check_planner(args.planner)
+    settings = _settings(args)
+    cfg = _episode_config(args, settings)
     out = _output_folder(args.out)
     viewer = None
     if args.viz == "live":
@@ -206,10 +255,8 @@ def _cmd_run(args) -> int:
 
         viewer = LiveViewer(corridor=sc.corridor, goal=sc.drone.goal)
     try:
-        s = run_episode(sc, seed=args.seed, perception=args.perception, out=out,
-                        cfg=EpisodeConfig(duration=args.duration, static_map=args.map,
-                                          frame_latency=args.frame_latency), renderer=args.renderer,
-                        on_frame=viewer)
+        s = run_episode(sc, seed=args.seed, perception=args.perception, planner=planner, out=out, cfg=cfg,
+                        on_frame=viewer, settings=settings)
         if viewer is not None and not args.no_wait and sys.stdin.isatty():
             input("episode finished; press Enter to stop the meshcat viewer ")
     finally:
@@ -219,7 +266,8 @@ def _cmd_run(args) -> int:
     ttg = f"{s['time_to_goal']:.2f} s" if s["time_to_goal"] is not None else "-"
     mc = s["min_clearance"]
     tm = s["timing"]
-    print(f"{s['scenario']} seed {s['seed']} perception {s['perception']}: {outcome}; time to goal {ttg}, "
+    planner_note = f" planner {s['planner']}" if planner else ""
+    print(f"{s['scenario']} seed {s['seed']} perception {s['perception']}{planner_note}: {outcome}; time to goal {ttg}, "
           f"path {s['path_length']:.2f} m, mean speed {s['mean_speed']:.2f} m/s, collisions {s['collision_count']}")
     print("min clearance [m]: " + ", ".join(f"{k} {v:.2f}" for k, v in mc.items() if v is not None))
     print(f"planner solve median {tm['planner_solve_ms'].get('median', '-')} ms, p99 {tm['planner_solve_ms'].get('p99', '-')} ms, "
@@ -286,13 +334,16 @@ def _cmd_sweep(args) -> int:
 
     load_scenario(args.scenario)  # validate before starting workers
     _check_perception(args.perception)
+    planner = _check_planner(args.planner)
+    settings = _settings(args)
+    cfg = _episode_config(args, settings)
     if args.junit:
         _writable_file(args.junit, "--junit")
     try:
         seeds = sweep.parse_seeds(args.seeds)
-        cfg = sweep.EpisodeConfig(static_map=args.map, frame_latency=args.frame_latency, renderer=args.renderer)
         agg = sweep.run_sweep(args.scenario, seeds, args.perception, Path(args.out), jobs=args.jobs,
-                              dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet, cfg=cfg)
+                              dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet, cfg=cfg,
+                              settings=settings, planner=planner)
     except sweep.SweepError as e:
         raise UserError(str(e)) from None
     r = agg["rates"]
@@ -300,7 +351,8 @@ def _cmd_sweep(args) -> int:
     def rate(k):
         return f"{100 * r[k]['rate']:.1f} % [{100 * r[k]['ci95'][0]:.1f}, {100 * r[k]['ci95'][1]:.1f}]"
 
-    print(f"{agg['scenario']} / {agg['perception']}: {agg['episodes']} episodes; success {rate('success')}, "
+    print(f"{agg['scenario']} / {agg['perception']}" + (f" / {agg['planner']}" if planner else "")
+          + f": {agg['episodes']} episodes; success {rate('success')}, "
           f"at-fault collision {rate('at_fault')}, only not-at-fault collisions {rate('not_at_fault_only')}, "
           f"timeout {rate('timeout')}")
     print(f"wrote {args.out}/summary.json, {args.out}/summary.md")
@@ -320,7 +372,6 @@ def _cmd_sweep(args) -> int:
 
 def _cmd_benchmark(args) -> int:
     from experiments import benchmark
-    from experiments.episode import EpisodeConfig
     from experiments.sweep import SweepError
 
     def names(text, known, option):
@@ -341,15 +392,20 @@ def _cmd_benchmark(args) -> int:
     for m in modes:
         _check_perception(m)
     people = names(args.people, tuple(benchmark.PEOPLE), "people")
-    count, static_map = args.seeds, args.map
-    if args.quick:  # a smoke-sized run: two families, the oracle on the known map, two seeds
+    planner = _check_planner(args.planner)
+    settings = _settings(args)
+    count, given = args.seeds, {}
+    if args.quick:  # a smoke-sized run: two families, the oracle on the known map (unless given), two seeds
         families = families if args.families else ("corridor", "head_on")
         modes = modes if args.perception else ("oracle",)
-        count, static_map = min(count, 2), "truth"
-    cfg = EpisodeConfig(static_map=static_map, frame_latency=args.frame_latency)
+        count = min(count, 2)
+        if args.map is None and "static_map" not in dict(settings.episode):
+            given["static_map"] = "truth"
+    cfg = _episode_config(args, settings, **given)
     try:
         report = benchmark.run_benchmark(Path(args.out), args.split, count, families, modes, people, jobs=args.jobs,
-                                         dask_address=args.dask, cfg=cfg, progress=not args.quiet)
+                                         dask_address=args.dask, cfg=cfg, progress=not args.quiet,
+                                         settings=settings, planner=planner)
     except SweepError as e:
         raise UserError(str(e)) from None
     print(benchmark.markdown(report))
@@ -376,8 +432,10 @@ def _cmd_compare(args) -> int:
 def _cmd_reproduce(args) -> int:
     from experiments.reproduce import reproduce
 
+    planner = _check_planner(args.planner)
+    settings = _settings(args)
     _output_folder(args.out)
-    reproduce(Path(args.out), quick=args.quick, jobs=args.jobs)
+    reproduce(Path(args.out), quick=args.quick, jobs=args.jobs, settings=settings, planner=planner)
     return 0
 
 
@@ -485,22 +543,41 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+PERCEPTION_HELP = ("dodt (default), oracle, oracle-360, oracle-noisy, static-only, a DODT preset, or your own "
+                   "perception class: module:Class with module a dotted module or a .py file; built with no arguments")
 RENDERER_HELP = ("the camera's renderer: gl (ours, OpenGL), pybullet (PyBullet's EGL plugin; egl is its older "
                  "name), tiny (PyBullet's TinyRenderer), auto (the first that works, in that order); default: the "
                  "scenario's")
 
 
 def _add_episode_options(parser: argparse.ArgumentParser) -> None:
-    """--map, --frame-latency and --renderer for run, sweep and bench loop (experiments.episode.STATIC_MAPS and
-    EpisodeConfig; not imported here: it loads the simulator)."""
+    """--map, --frame-latency and --renderer for run, sweep and benchmark nav (experiments.episode.STATIC_MAPS and
+    EpisodeConfig; not imported here: it loads the simulator), with --planner, --config and --set. Their
+    defaults are None: an option given is told apart from one left out (_episode_config)."""
     parser.add_argument("--renderer", choices=RENDERER_CHOICES, default=None, help=RENDERER_HELP)
-    parser.add_argument("--map", choices=("depth", "truth"), default="depth",
+    parser.add_argument("--map", choices=("depth", "truth"), default=None,
                         help="static map: depth (built from the camera, default) or truth (the scenario's geometry "
                              "known from the start; with the oracles or static-only nothing is rendered: a "
                              "fast planner test)")
-    parser.add_argument("--frame-latency", type=_frame_latency, default=1, metavar="N",
+    parser.add_argument("--frame-latency", type=_frame_latency, default=None, metavar="N",
                         help="camera periods between a frame's capture and its perception (default 1: the next "
                              "frame renders in a second process meanwhile; 0: at once, as before)")
+    _add_config_options(parser)
+
+
+def _add_config_options(parser: argparse.ArgumentParser, perception: bool = False) -> None:
+    """--planner, --config and --set (experiments.plugins, experiments.config)."""
+    if perception:
+        parser.add_argument("--perception", default="dodt", help=PERCEPTION_HELP)
+    parser.add_argument("--planner", default="default", metavar="NAME|module:Class",
+                        help="default (the MPC planner behind the passive-safety shield) or your own planner class: "
+                             "module:Class with module a dotted module or a .py file; built with no arguments")
+    parser.add_argument("--config", default=None, metavar="FILE.toml",
+                        help="configuration overrides: TOML tables episode, shield, navigator (navigator.mpc, "
+                             "navigator.maneuvers), map, dodt (experiments.config)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="one override, the value a TOML literal (e.g. shield.a_brake=3.0, "
+                             "navigator.mpc.horizon=30); repeatable, applied after --config")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -551,7 +628,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="fly one closed-loop episode headless; write summary.json and the episode log")
     r.add_argument("scenario", help="a scenario file, or the name of a shipped one (see `dodt-nav scenarios`)")
     r.add_argument("--seed", type=_seed, default=None, help="seed (default: the scenario's)")
-    r.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, oracle-noisy, static-only, or a DODT preset")
+    r.add_argument("--perception", default="dodt", help=PERCEPTION_HELP)
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--duration", type=_seconds, default=None, help="time limit in seconds (default: the scenario's)")
     _add_episode_options(r)
@@ -580,7 +657,7 @@ def build_parser() -> argparse.ArgumentParser:
     w = sub.add_parser("sweep", help="run many seeds in parallel; resumable; rates with Wilson intervals; CI gate")
     w.add_argument("scenario", help="a scenario file, or the name of a shipped one")
     w.add_argument("--seeds", default="0:20", help="start:stop, a number, or a comma list (default 0:20)")
-    w.add_argument("--perception", default="dodt", help="dodt (default), oracle, oracle-360, oracle-noisy, static-only, or a DODT preset")
+    w.add_argument("--perception", default="dodt", help=PERCEPTION_HELP)
     w.add_argument("--jobs", type=_jobs, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
     w.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
     w.add_argument("--max-collision-rate", type=_fraction, default=None,
@@ -601,7 +678,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="dev: seeds 0-999, for tuning and choosing; test: seeds 1000-1999, for reported figures")
     bm.add_argument("--seeds", type=_whole(1, 1000), default=100, help="seeds per cell, the first of the split (default 100)")
     bm.add_argument("--families", default=None, help="comma list (default: all shipped families)")
-    bm.add_argument("--perception", default=None, help="comma list of modes (default: dodt,oracle,static-only)")
+    bm.add_argument("--perception", default=None, help="comma list of modes or module:Class plug-ins "
+                                                        "(default: dodt,oracle,static-only)")
     bm.add_argument("--people", default="blind,aware",
                     help="blind (people do not see the drone), aware (they do), or both (default)")
     bm.add_argument("--jobs", type=_jobs, default=max(1, os.cpu_count() or 1), help="parallel episodes (default: CPUs)")
@@ -627,6 +705,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--out", required=True, help="output folder (rerun to resume the sweeps)")
     rep.add_argument("--quick", action="store_true", help="a small version that finishes in minutes")
     rep.add_argument("--jobs", type=_jobs, default=max(1, os.cpu_count() or 1), help="parallel episodes")
+    _add_config_options(rep)
     rep.set_defaults(func=_cmd_reproduce)
 
     for name, func, text in (("train-detector", _cmd_train_detector,

@@ -19,10 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from dodt.config import DODTConfig
 from dodt.geometry import wrap_angle
 from experiments.environment import environment
 from experiments.episode_log import EpisodeLog, r4
+from experiments.config import Settings
 from experiments.perception_modes import PerceptionModule, make_perception
+from experiments.plugins import DEFAULT_PLANNER, is_spec, make_planner
 from planner.fallback import brake_and_hold
 from planner.mpc import MPCConfig
 from planner.navigator import MPCPlanner, NavigatorConfig
@@ -77,11 +80,14 @@ def map_config_for(scenario, robot_radius: float) -> MapConfig:
                      robot_size=(2 * robot_radius, 2 * robot_radius, 0.3))
 
 
-def default_planner(robot_radius: float) -> PassiveSafetyShield:
+def default_planner(robot_radius: float, settings: Settings | None = None) -> PassiveSafetyShield:
     """The maneuver + MPC planner behind the passive-safety shield, sized for the drone (its collision box's
-    horizontal circumscribed radius)."""
-    return PassiveSafetyShield(MPCPlanner(NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius))),
-                               ShieldConfig(drone_radius=robot_radius))
+    horizontal circumscribed radius); ``settings``' navigator and shield sections applied on top."""
+    nav = NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius))
+    shield = ShieldConfig(drone_radius=robot_radius)
+    if settings:
+        nav, shield = settings.navigator_config(nav), settings.shield_config(shield)
+    return PassiveSafetyShield(MPCPlanner(nav), shield)
 
 
 def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePrediction, ...]:
@@ -102,13 +108,16 @@ def _finite_trajectory(traj) -> bool:
 
 
 def run_episode(scenario, seed: int | None = None, perception: str | PerceptionModule = "dodt",
-                planner: Planner | None = None, out: Path | None = None, cfg: EpisodeConfig = EpisodeConfig(),
-                renderer: str | None = None, on_frame=None) -> dict:
+                planner: str | Planner | None = None, out: Path | None = None, cfg: EpisodeConfig = EpisodeConfig(),
+                renderer: str | None = None, on_frame=None, settings: Settings | None = None) -> dict:
     """Fly one episode; returns the summary (and writes summary.json and log.jsonl.gz to ``out``).
 
     scenario: a Scenario or a shipped scenario name / TOML path. perception: a mode name
-    (dodt, oracle, static-only, any DODT preset) or a PerceptionModule. planner: any object with
-    ``reset()`` and ``plan(PlannerInput) -> Trajectory``; default the A* + MPC planner.
+    (dodt, oracle, static-only, any DODT preset), a plug-in's ``module:Class`` (experiments.plugins) or a
+    PerceptionModule. planner: any object with ``reset()`` and ``plan(PlannerInput) -> Trajectory``, a
+    plug-in's ``module:Class``, or None / "default": the maneuver + MPC planner behind the shield.
+    settings: overrides by section (experiments.config.Settings; its episode section is applied to
+    ``cfg``); the effective values of the overridden sections are recorded as the summary's ``config``.
     on_frame(view): optional callback per camera frame (live viewers); view is a dict with t, frame
     (SensorFrame), truth (GroundTruth), perception (PerceptionOutput), map (VoxelMap), trajectory
     (the current plan or None), T_world_body (4x4), path (the planner's global path or None).
@@ -118,7 +127,13 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     sc = load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario
     seed = sc.seed if seed is None else int(seed)
     sc = sc.for_seed(seed)  # a scenario with ranges: this seed's draw
-    perc = make_perception(perception) if isinstance(perception, str) else perception
+    settings = settings or Settings()
+    cfg = settings.episode_config(cfg)
+    perc = (make_perception(perception, dodt_set=settings.dodt_assignments()) if isinstance(perception, str)
+            else perception)
+    perception_label = perception if isinstance(perception, str) and is_spec(perception) else None
+    planner_label = planner if isinstance(planner, str) and planner != DEFAULT_PLANNER else None
+    planner = make_planner(planner) if isinstance(planner, str) else planner
     if cfg.static_map not in STATIC_MAPS:
         raise ValueError(f"static_map: {cfg.static_map!r} is not one of {', '.join(STATIC_MAPS)}")
     duration = sc.duration if cfg.duration is None else cfg.duration
@@ -138,8 +153,16 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
         world = World(sc, seed=seed, renderer=renderer if renderer is not None else cfg.renderer,
                       segmentation=False, render=render, frame_latency=cfg.frame_latency, color=color,
                       render_process=cfg.render_process and render and cfg.frame_latency > 0)
-        planner = planner if planner is not None else default_planner(world.vehicle.radius)
-        summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame)
+        used = {"episode": cfg}
+        if planner is None:
+            planner = default_planner(world.vehicle.radius, settings)
+            used.update(shield=planner.cfg, navigator=planner.planner.cfg)
+        dodt = getattr(perc, "dodt", None)
+        if isinstance(getattr(dodt, "cfg", None), DODTConfig):
+            used["dodt"] = dodt.cfg
+        labels = {"perception": perception_label or getattr(perc, "name", type(perc).__name__),
+                  "planner": planner_label or type(planner).__name__}
+        summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame, settings, used, labels)
     finally:
         if world is not None:
             world.close()
@@ -156,10 +179,13 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     return summary
 
 
-def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeConfig, duration, on_frame) -> dict:
+def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeConfig, duration, on_frame,
+          settings: Settings, used: dict, labels: dict) -> dict:
     perc.reset()
     planner.reset()
-    vmap = VoxelMap(map_config_for(sc, world.vehicle.radius))
+    vmap = VoxelMap(settings.map_config(map_config_for(sc, world.vehicle.radius)))
+    used["map"] = vmap.cfg
+    config = settings.record(used) if settings else None
     known_map = cfg.static_map == "truth"
     if known_map:
         vmap.set_known(static_occupancy(sc, vmap.origin, vmap.dims, vmap.res))
@@ -171,8 +197,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     goal = np.asarray(sc.drone.goal, dtype=float)
     control_dt = world.dt * world.steps_per_control
     plan_every = max(1, int(round(1.0 / (cfg.plan_rate * control_dt))))
-    log.add({"k": "header", "scenario": sc.name, "source": sc.source, "seed": seed, "perception": perc.name,
-             "planner": type(planner).__name__, "duration": duration, "static_map": cfg.static_map,
+    log.add({"k": "header", "scenario": sc.name, "source": sc.source, "seed": seed, "perception": labels["perception"],
+             "planner": labels["planner"], "duration": duration, "static_map": cfg.static_map,
              "frame_latency": cfg.frame_latency,
              "rates": {"control": 1.0 / control_dt, "camera": sc.rates.camera, "plan": cfg.plan_rate,
                        "map": sc.rates.camera / cfg.map_every},
@@ -181,7 +207,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
              "map_origin": list(vmap.cfg.origin),
              "static": [o.to_json() for o in world.obstacle_truth() if o.kind == "static"],
              "people": [{"id": i, "height": round(w.height, 3), "sees_drone": bool(sees)}
-                        for i, w, sees in zip(world.person_ids, world.walkers, world.crowd.sees)]})
+                        for i, w, sees in zip(world.person_ids, world.walkers, world.crowd.sees)],
+             **({"config": config} if config else {})})
 
     co = sc.corridor  # its walls are known: the planner keeps inside them (the map sees them only at a glance)
     geofence = (np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2]))
@@ -199,7 +226,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
         t = world.time
         if frame is not None:
             t0 = time.perf_counter()
-            po = perc.update(frame, truth if perc.uses_ground_truth else None)
+            po = perc.update(frame, truth if getattr(perc, "uses_ground_truth", False) else None)
             perc_ms = (time.perf_counter() - t0) * 1e3
             if po.skipped is None:
                 obstacles, obstacles_stamp = po.obstacles, po.stamp
@@ -287,6 +314,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
              "time_to_goal": None if time_to_goal is None else round(time_to_goal, 5)})
     summary = log.summarize()
     summary["map_voxels_occupied"] = int(vmap.occupied_count())
+    if config:
+        summary["config"] = config
     return summary
 
 

@@ -4,7 +4,8 @@ A perception module receives each sensor frame (and, only if it declares
 ``uses_ground_truth``, the simulator's truth for that frame) and returns a
 ``PerceptionOutput``: the moving obstacles for the planner and the boxes the static map must
 clear. To plug in another detector, implement ``reset`` and ``update`` and pass an instance to
-``experiments.episode.run_episode(perception=...)``. A module that declares ``uses_images = False``
+``experiments.episode.run_episode(perception=...)``, or name its class as ``module:Class`` to any
+command's ``--perception`` (experiments.plugins; built with no arguments; examples/custom_perception.py). A module that declares ``uses_images = False``
 reads no depth or colour; with a known static map (``EpisodeConfig.static_map = "truth"``) the
 simulator then renders nothing (a module without the attribute is taken to need images). One that
 declares ``uses_color = False`` reads no colour: its frames carry none, and the simulator's gl
@@ -34,6 +35,7 @@ from typing import Protocol
 
 import numpy as np
 
+from dodt.config import DODTConfig, override
 from dodt.frames import SensorFrame
 from dodt.geometry import wrap_angle
 from dodt.pipeline import DODT
@@ -118,9 +120,11 @@ class DODTPerception:
     uses_ground_truth = False
     uses_images = True
 
-    def __init__(self, config_name: str = "dodt", learned_detector=None, moving_rule: MovingTrackRule | None = MovingTrackRule()):
+    def __init__(self, config_name: str = "dodt", learned_detector=None, moving_rule: MovingTrackRule | None = MovingTrackRule(),
+                 config: DODTConfig | None = None):
         self.name = config_name
-        self.dodt = DODT(preset(config_name), learned_detector=learned_detector)
+        # config: DODT's configuration (default: the preset of that name), e.g. with --set dodt.* applied
+        self.dodt = DODT(preset(config_name) if config is None else config, learned_detector=learned_detector)
         self.moving_rule = moving_rule
         # the closed loop may set this to VoxelMap.established_fraction: a track the rule would pass is
         # then checked against the static map (MovingTrackRule.on_structure)
@@ -291,8 +295,14 @@ class StaticOnlyPerception:
         return PerceptionOutput(stamp=frame.stamp, obstacles=())
 
 
-def make_perception(mode: str, learned_detector=None) -> PerceptionModule:
-    """A perception module by name: dodt (or any DODT preset), oracle, static-only."""
+def make_perception(mode: str, learned_detector=None, dodt_set: tuple[str, ...] = ()) -> PerceptionModule:
+    """A perception module by name: dodt (or any DODT preset), oracle, static-only, or a plug-in's
+    ``module:Class`` (experiments.plugins). dodt_set: ``section.field=value`` assignments applied to a DODT
+    preset's configuration (dodt.config.override); the other modes do not read them."""
+    from experiments.plugins import is_spec, make_perception_plugin
+
+    if is_spec(mode):
+        return make_perception_plugin(mode)
     if mode == "oracle":
         return OraclePerception()
     if mode == "oracle-360":
@@ -302,5 +312,6 @@ def make_perception(mode: str, learned_detector=None) -> PerceptionModule:
     if mode == "static-only":
         return StaticOnlyPerception()
     if mode in PRESETS:
-        return DODTPerception(mode, learned_detector=learned_detector)
+        return DODTPerception(mode, learned_detector=learned_detector,
+                              config=override(preset(mode), dodt_set) if dodt_set else None)
     raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(known_modes())}")

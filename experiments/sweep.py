@@ -12,7 +12,6 @@ optionally JUnit XML with one test case per seed.
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import sys
@@ -25,7 +24,9 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from experiments.environment import distinct
+from experiments.config import Settings
 from experiments.episode import EpisodeConfig, run_episode
+from experiments.plugins import DEFAULT_PLANNER_LABEL, planner_label
 
 RESULTS = "results.jsonl"
 SEED_MAX = 2**63 - 1  # what a scenario file's seed (a TOML integer) holds
@@ -62,22 +63,23 @@ def parse_seeds(text: str) -> list[int]:
 
 
 
-def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval of a proportion k/n."""
+def wilson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a proportion k/n (scipy.stats.binomtest); no trials: (0, 1)."""
     if n == 0:
         return (0.0, 1.0)
-    ph = k / n
-    den = 1 + z * z / n
-    mid = (ph + z * z / (2 * n)) / den
-    half = z * math.sqrt(ph * (1 - ph) / n + z * z / (4 * n * n)) / den
-    return (max(0.0, mid - half), min(1.0, mid + half))
+    from scipy.stats import binomtest
+
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return (max(0.0, float(ci.low)), min(1.0, float(ci.high)))
 
 
 def run_one(scenario, seed: int, perception: str, episodes_dir: str, keep_log: bool,
-            cfg: EpisodeConfig = EpisodeConfig()) -> dict:
-    """One episode in a worker (module-level so process pools and Dask can ship it)."""
+            cfg: EpisodeConfig = EpisodeConfig(), settings: Settings | None = None, planner: str | None = None) -> dict:
+    """One episode in a worker (module-level so process pools and Dask can ship it). perception and planner
+    are names or ``module:Class`` specs, resolved here (experiments.plugins); settings: the overrides
+    (experiments.config)."""
     out = Path(episodes_dir) / f"seed_{seed:04d}"
-    s = run_episode(scenario, seed=seed, perception=perception, out=out, cfg=cfg)
+    s = run_episode(scenario, seed=seed, perception=perception, planner=planner, out=out, cfg=cfg, settings=settings)
     if s["success"] and not keep_log:
         shutil.rmtree(out, ignore_errors=True)
     return s
@@ -116,36 +118,38 @@ def _append(path: Path, summary: dict) -> None:
 
 
 class _Progress:
-    def __init__(self, total: int, done: int, stream=sys.stderr):
-        self.total, self.done, self.stream = total, done, stream
-        self.t0 = time.perf_counter()
-        self.new = 0
+    """The progress bar of a sweep or benchmark (tqdm): episodes done of all, failures, time left. It writes
+    nothing unless ``stream`` is a terminal (a log file or a CI job gets no bar)."""
+
+    def __init__(self, total: int, done: int, stream=None):
+        from tqdm import tqdm
+
+        stream = sys.stderr if stream is None else stream
         self.failures = 0
+        self.bar = tqdm(total=total, initial=done, unit="episode", file=stream, dynamic_ncols=True,
+                        disable=not (hasattr(stream, "isatty") and stream.isatty()))
 
     def tick(self, s: dict) -> None:
-        self.done += 1
-        self.new += 1
         self.failures += not s["success"]
-        el = time.perf_counter() - self.t0
-        eta = el / self.new * (self.total - self.done)
-        w = 30
-        fill = int(w * self.done / max(self.total, 1))
-        self.stream.write(f"\r[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total} episodes, "
-                          f"{self.failures} failed, {el:.0f} s elapsed, ~{eta:.0f} s left ")
-        self.stream.flush()
+        self.bar.set_postfix_str(f"{self.failures} failed", refresh=False)
+        self.bar.update(1)
 
     def close(self) -> None:
-        self.stream.write("\n")
-        self.stream.flush()
+        self.bar.close()
 
 
 def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs: int = 1,
               dask_address: str | None = None, keep_logs: bool = False, progress: bool = True,
-              cfg: EpisodeConfig = EpisodeConfig()) -> dict:
+              cfg: EpisodeConfig = EpisodeConfig(), settings: Settings | None = None,
+              planner: str | None = None) -> dict:
     """Run the seeds not yet in ``out/results.jsonl``; return the aggregate over all requested seeds.
     cfg: every episode's settings (experiments.episode.EpisodeConfig); a folder holds results of one
     static map and one frame latency only. Episodes render in a second process only when they run one
-    at a time here: with several at once the cores are busy already (the results are the same)."""
+    at a time here: with several at once the cores are busy already (the results are the same).
+    settings: configuration overrides (experiments.config); planner: a ``module:Class`` spec or None for the
+    default (experiments.plugins). A folder holds results of one planner and one set of overrides only."""
+    settings = settings or Settings()
+    cfg = settings.episode_config(cfg)
     if jobs > 1 or dask_address:
         cfg = replace(cfg, render_process=False)
     out = Path(out)
@@ -163,6 +167,7 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
         if clash:
             raise SweepError(f"{res_path}: holds results with the {what} {clash[0].get(key, old_default)!r}, not "
                              f"{want!r}; use another --out folder")
+    check_same_setup(res_path, done.values(), settings, planner)
     from sim import load_scenario
 
     name = load_scenario(scenario).name
@@ -181,15 +186,28 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
         if bar:
             bar.tick(s)
 
-    run_tasks([(None, (scenario, seed, perception, episodes_dir, keep_logs, cfg)) for seed in todo], jobs,
-              dask_address, lambda _key, s: finished(s))
+    run_tasks([(None, (scenario, seed, perception, episodes_dir, keep_logs, cfg, settings, planner)) for seed in todo],
+              jobs, dask_address, lambda _key, s: finished(s))
     if bar:
         bar.close()
-    agg = aggregate([done[s] for s in seeds], name, perception)
+    agg = aggregate([done[s] for s in seeds], name, perception, planner=planner_label(planner), settings=settings)
     agg["wall_s_this_run"] = round(time.perf_counter() - t0, 1)
     (out / "summary.json").write_text(json.dumps(agg, indent=1))
     (out / "summary.md").write_text(markdown(agg))
     return agg
+
+
+def check_same_setup(res_path: Path, done, settings: Settings, planner: str | None) -> None:
+    """Refuse a results file of another planner or other configuration overrides (a row without the
+    entries: the default planner, no overrides)."""
+    want_planner, want_set = planner_label(planner), settings.assignments()
+    for s in done:
+        if s.get("planner", DEFAULT_PLANNER_LABEL) != want_planner:
+            raise SweepError(f"{res_path}: holds results of planner {s.get('planner')!r}, not {want_planner!r}; "
+                             f"use another --out folder")
+        if (s.get("config") or {}).get("set", {}) != want_set:
+            raise SweepError(f"{res_path}: holds results of other configuration overrides "
+                             f"({(s.get('config') or {}).get('set', {})} against {want_set}); use another --out folder")
 
 
 def _exit_with_parent(parent_pid: int) -> None:
@@ -307,11 +325,21 @@ def contact_speeds(summaries: list[dict]) -> dict:
     return {k: sorted(v) for k, v in sorted(out.items())}
 
 
-def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
+def aggregate(summaries: list[dict], scenario: str, perception: str, planner: str | None = None,
+              settings: Settings | None = None) -> dict:
+    """The sweep's summary; planner (its label, experiments.plugins.planner_label) and settings (the overrides)
+    are recorded when given: ``planner`` and ``config`` (the overrides, ``set``, and the full values of each
+    overridden section, as the episodes recorded them)."""
     n = len(summaries)
     rates = rates_of(summaries)
+    extra = {}
+    if planner is not None:
+        extra["planner"] = planner
+    if settings is not None:
+        recorded = next((s["config"] for s in summaries if s.get("config")), None)
+        extra["config"] = recorded if settings else {}
     return {
-        "scenario": scenario, "perception": perception, "episodes": n, "rates": rates,
+        "scenario": scenario, "perception": perception, **extra, "episodes": n, "rates": rates,
         "contact_speeds": contact_speeds(summaries),
         "time_to_goal": _dist(s["time_to_goal"] for s in summaries),
         "mean_speed": _dist(s["mean_speed"] for s in summaries if s["reached_goal"]),
@@ -331,6 +359,9 @@ def aggregate(summaries: list[dict], scenario: str, perception: str) -> dict:
 
 def markdown(agg: dict) -> str:
     L = [f"# Sweep: {agg['scenario']}, perception {agg['perception']}, {agg['episodes']} episodes", "",
+         *([f"Planner: {agg['planner']}", ""] if agg.get("planner") not in (None, DEFAULT_PLANNER_LABEL) else []),
+         *(["Configuration overrides: " + ", ".join(f"{k}={v}" for k, v in agg["config"]["set"].items()), ""]
+           if (agg.get("config") or {}).get("set") else []),
          "| outcome | count | rate | 95 % Wilson interval |", "|---|---|---|---|"]
     for k, r in agg["rates"].items():
         L.append(f"| {k} | {r['count']} | {100 * r['rate']:.1f} % | {100 * r['ci95'][0]:.1f}–{100 * r['ci95'][1]:.1f} % |")

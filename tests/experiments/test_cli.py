@@ -64,10 +64,15 @@ def test_reproduce_options_reach_the_report(monkeypatch, tmp_path):
     import experiments.reproduce
     from experiments.cli import main
 
+    from experiments.config import Settings
+
     calls = []
-    monkeypatch.setattr(experiments.reproduce, "reproduce", lambda out, quick, jobs: calls.append((out, quick, jobs)))
+    monkeypatch.setattr(experiments.reproduce, "reproduce",
+                        lambda out, quick, jobs, settings, planner: calls.append((out, quick, jobs, settings, planner)))
     assert main(["reproduce", "--out", str(tmp_path / "rep"), "--quick", "--jobs", "1"]) == 0
-    assert calls == [(tmp_path / "rep", True, 1)]
+    assert calls == [(tmp_path / "rep", True, 1, Settings(), None)]
+    assert main(["reproduce", "--out", str(tmp_path / "rep"), "--set", "shield.a_brake=3.0"]) == 0
+    assert calls[-1][3].assignments() == {"shield.a_brake": 3.0}
 
 
 @pytest.mark.parametrize("renderer", ["gl", "pybullet", "egl", "tiny", None])
@@ -78,7 +83,7 @@ def test_sweep_renderer_option_reaches_every_episode(monkeypatch, tmp_path, rend
 
     seen = []
 
-    def fake(scenario, seeds, perception, out, jobs, dask_address, keep_logs, progress, cfg):
+    def fake(scenario, seeds, perception, out, jobs, dask_address, keep_logs, progress, cfg, settings=None, planner=None):
         seen.append(cfg.renderer)
         return sweep.aggregate([], scenario, perception)
 

@@ -505,3 +505,20 @@ def test_bad_scenario_file_exits_2(tmp_path):
     assert r.returncode == 2
     assert "corridor.width" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_progress_bar_writes_nothing_unless_a_terminal():
+    import io
+
+    from experiments.sweep import _Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    for stream, shown in ((io.StringIO(), False), (Terminal(), True)):
+        bar = _Progress(3, 1, stream)
+        bar.tick({"success": False})
+        bar.close()
+        text = stream.getvalue()
+        assert bool(text) is shown and (not shown or ("2/3" in text and "1 failed" in text))
