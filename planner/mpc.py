@@ -2,11 +2,11 @@
 
 State x = [p, v] in R^6, input u = a in R^3, step dt:
     (1) p_{k+1} = p_k + dt v_k + dt^2/2 a_k,   v_{k+1} = v_k + dt a_k          (x_0 given)
-Decision vector z = [x_1..x_N, u_0..u_{N-1}, sd_1..sd_N, ss_1..ss_N, sc_1..sc_N] (12 N): one dynamic,
-one static and one comfort slack per step, all >= 0 and in metres.
+Decision vector z = [x_1..x_N, u_0..u_{N-1}, sd_1..sd_N, ss_1..ss_N] (11 N): one dynamic and one static
+slack per step, both >= 0 and in metres.
     (2) J = sum_{k<N} Qp|p_k - p^_k|^2 + Qf|p_N - p^_N|^2 + sum_k Qv|v_k - v^_k|^2
           + sum_k R|u_k|^2 + Rd|u_k - u_{k-1}|^2   (u_{-1}: the current commanded acceleration)
-          + sum_k w1 (sd_k + s ss_k) + w2 (sd_k^2 + s ss_k^2) + wc1 sc_k + wc2 sc_k^2   (s: static_slack_scale)
+          + sum_k w1 (sd_k + s ss_k) + w2 (sd_k^2 + s ss_k^2)   (s: static_slack_scale)
     (3) |v_k| <= v_max (k >= 1), |u_k| <= a_max, z_min <= p_k,z <= z_max.
     (4) Moving obstacle j, step k: outside the ellipsoid f(p) = sum_i ((p_i - o_i)/a_i)^2 >= 1,
         o = predicted centre at t_k = k dt, a = size/2 + robot_radius + margin (+ z_std std(t_k) in x, y);
@@ -18,10 +18,9 @@ one static and one comfort slack per step, all >= 0 and in metres.
         Where c_k lies within side_bias of the obstacle's line of relative motion, it is first moved
         side_bias off that line, toward the obstacle's back: near head-on, from behind or crossing, the
         plane then asks the drone to step aside or pass behind rather than to outrun the obstacle.
-        Optional comfort rows: the same planes moved comfort_margin outward, on the cheap slack sc_k.
     (4') Passing sides: the homotopy_obstacles nearest obstacles may be forced to either side of their
         line of relative motion (c_k mirrored across it before linearising). The side kept from the
-        last call is solved first; when it needs more than homotopy_trigger of dynamic or comfort slack,
+        last call is solved first; when it needs more than homotopy_trigger of dynamic slack,
         every other side combination is solved too, each by its own OSQP instance warm-started from its
         own last solution, and the cheapest J wins (with hysteresis toward the side kept).
     (5) Occupied voxels (centres q): greedy separating planes per step, from c_k:
@@ -29,10 +28,7 @@ one static and one comfort slack per step, all >= 0 and in metres.
         points behind the plane through q are dropped, repeat up to K_s times. Where c_k is closer than
         that to a voxel (the previous plan runs through it), c_k is first slid sideways to the nearest
         clear spot: planes from a clear point are consistent (it satisfies them all) and lead around.
-    (6) Optional field of view: for k <= K_fov the horizontal velocity stays in the camera's cone,
-        (+-n - tan(th) h) . v_k <= eps (h the heading, n its left normal): the drone moves into space
-        its camera sees, up to eps = fov_free_speed in other directions.
-    (7) Optional geofence (the known walls of the flight area): g (p_k,xy - lo - r) + ss_k >= 0 and
+    (6) Optional geofence (the known walls of the flight area): g (p_k,xy - lo - r) + ss_k >= 0 and
         g (hi - r - p_k,xy) + ss_k >= 0, r = geofence_margin, g = geofence_scale: the side walls, which a
         forward camera sees only at a grazing angle; a violation costs g times the static slack.
 P and the sparsity pattern of A are fixed at construction (room for max_dynamic + K_s rows per
@@ -62,11 +58,7 @@ class MPCConfig:
     dt: float = 0.1  # s; Intent-MPC ts 0.1 = its prediction_time_step
     v_max_xy: float = 2.0  # m/s per axis; mpc-dev solver setup |v| <= 2
     v_max_z: float = 1.0  # m/s; ours: gentle altitude changes indoors
-    # m/s^2 per axis; ours: above the 1.5 cruise acceleration, room to dodge. 4 (a 22 deg tilt, within the drone's
-    # limits) was measured: on corridor seeds 0-39, where the failures had been traced, dodt 65 % against 47.5 %;
-    # on the untouched seeds 40-119, with the height-test fix beside it, 52.5 % against 58.8 % (16 mended, 21
-    # broken): fewer person collisions (27 -> 21) but more with walls and obstacles (5 -> 17)
-    a_max_xy: float = 2.5
+    a_max_xy: float = 2.5  # m/s^2 per axis; ours: above the 1.5 cruise acceleration, room to dodge
     a_max_z: float = 2.0  # m/s^2; ours
     z_min: float = 0.7  # m; Intent-MPC / DODT planner height band lower bound 0.7
     z_max: float = 2.0  # m; ours: 3 m corridor ceiling minus a metre
@@ -75,21 +67,10 @@ class MPCConfig:
     w_terminal: float = 30.0  # terminal position; ours
     w_acc: float = 0.1  # acceleration; ours (ratio as above)
     w_jerk: float = 1.0  # (a_k - a_{k-1}); ours, smooths the commanded acceleration
-    w_slack_lin: float = 500.0  # per metre; ours: an exact penalty (above the tracking multipliers; 200 is not)
+    w_slack_lin: float = 500.0  # per metre; ours: an exact penalty (above the tracking multipliers)
     w_slack_quad: float = 5e3  # per metre^2; ours (Intent-MPC 100/1000 on unscaled slack); larger: more ADMM iterations
-    fov_half_angle: float | None = None  # rad; constraint (6): fly only where the camera looks (e.g. 0.7 for
-    # the D435's +-43.5 deg less a margin); None: off. Tried on: sideways dodges into unseen walls went, but
-    # with the heading turned along each dodge the drone lost sight of the person it dodged, and corridor
-    # seeds 0-14 failed 12 times against 8 without it (Intent-MPC has optional FOV planes too)
-    fov_steps: int = 10  # steps (1 s) under the FOV constraint; later ones may assume the heading has turned
-    max_backward_speed: float | None = None  # m/s against the heading over the same steps (when the FOV
-    # constraint is off): no fast blind reversing; None: off. Tried at 0.5 (with a 1.2 m/s cruise and a
-    # 0.4 m margin) after an oracle episode fled a person backwards at 1.7 m/s into another: corridor seeds
-    # 0-7 then failed 9 times in 14 episodes (dodt + oracle) against 4 without it, so it is off
-    fov_free_speed: float = 0.3  # m/s allowed in any direction (backing off, small corrections)
     static_slack_scale: float = 10.0  # static slack costs this many times the dynamic one: squeezed between a
-    # person and a wall, the plan eats into the person's margin (which holds its uncertainty), not the wall's;
-    # ours, after a corridor episode where equal weights put the drone against the wall
+    # person and a wall, the plan eats into the person's margin (which holds its uncertainty), not the wall's; ours
     robot_radius: float = 0.3  # m; our drone's collision box is ~0.55 x 0.55 m in x, y
     dynamic_margin: float = 0.3  # m; ours (Intent-MPC dynamic_safety 0.6 includes the robot)
     static_margin: float = 0.2  # m; ours
@@ -100,31 +81,20 @@ class MPCConfig:
     static_radius: float = 2.5  # m; voxels farther than this from c_k are ignored; ours
     voxel_size: float = 0.1  # m; map resolution (Intent-MPC map res 0.1)
     side_bias: float = 0.4  # m; near head-on, linearise as if c_k were this far aside: breaks the tie; ours
-    # (0.1 before relative_side; 0.7 measured: oracle-360 corridor seeds 0-39 75 % against 80 % at 0.4)
     relative_side: bool = True  # side_bias applies across each obstacle's velocity relative to the planned
-    # motion, not across the direction of travel; ours. A person walking into a waiting drone from behind or
-    # head-on then gets a tangent plane that says "step aside" instead of "outrun it" (which the drone,
-    # blocked or slower, cannot). Measured on corridor seeds 0-39 with side_bias 0.4: oracle-360 success
-    # 67.5 % -> 80 %, dodt 40 % -> 52.5 %
-    geofence_margin: float = 0.55  # m from a known wall (7): the drone's collision box (0.51 x 0.70 m, half-diagonal
-    # 0.43) with a tilt and a few cm of tracking error and slack; ours. 0.45 was measured: with dodt, 5 of 40
-    # corridor episodes ended against a side wall with the drone centred 1.57 m off the axis (0.43 from it)
+    # motion (False: across the direction of travel); ours. A person walking into a waiting drone from behind
+    # or head-on then gets a tangent plane that says "step aside" instead of "outrun it" (which the drone,
+    # blocked or slower, cannot)
+    geofence_margin: float = 0.55  # m from a known wall (6): half the diagonal of the drone's collision box
+    # (0.51 x 0.70 m: 0.43) plus room for a tilt, a few cm of tracking error and slack; ours
     geofence_scale: float = 3.0  # the geofence rows are scaled by this: a metre beyond the fence costs this many
-    # metres of static slack, so a squeeze from moving obstacles is not resolved by flying into a side wall;
-    # ours, after dodt episodes ended against a wall 0.12-0.15 m beyond a fence of 0.55 m on plain slack
-    comfort_margin: float = 0.0  # m beyond each dynamic half-space, kept softly (slack cost w_comfort_*): the plan
-    # keeps this much more room from people where it costs little; ours, off: 0.5 m measured on oracle-360
-    # corridor seeds 0-39 gave 72.5 % success against 80 % (wider berths from people pushed the drone into
-    # walls and obstacles)
-    w_comfort_lin: float = 10.0  # per metre (one comfort slack per step, over all obstacles); ours
-    w_comfort_quad: float = 100.0  # per metre^2; ours
+    # metres of static slack, so a squeeze from moving obstacles is not resolved by flying into a side wall; ours
     homotopy_obstacles: int = 1  # the nearest this many moving obstacles are tried on both sides (2^M QPs per
     # call, the cheapest kept); ours, in the spirit of Intent-MPC's one solve per intent. 0: one QP, the
-    # side each obstacle is passed on inherited from the previous plan through its linearisation. Measured
-    # on oracle-360 corridor seeds 0-39 with the geofence: 1 gave 85 % success against 80 % with 0
+    # side each obstacle is passed on inherited from the previous plan through its linearisation
     homotopy_range: float = 2.0  # m; only obstacles whose ellipsoid comes this close to the plan
-    homotopy_trigger: float = 0.05  # m; the other sides are tried only when the side kept needs more dynamic or
-    # comfort slack than this somewhere (most calls then solve one QP)
+    homotopy_trigger: float = 0.05  # m; the other sides are tried only when the side kept needs more dynamic
+    # slack than this somewhere (most calls then solve one QP)
     homotopy_max_iter: int = 300  # the other sides are compared on solves this short...
     homotopy_eps: float = 1e-2  # ...and this loose; the winner is then finished at eps_abs / eps_rel
     homotopy_hysteresis: float = 0.1  # another side must cost this fraction less than the side kept...
@@ -167,8 +137,10 @@ class MPC:
         self.N, self.n = N, 12 * N
         self._iu, self._isd, self._iss, self._isc = 6 * N, 9 * N, 10 * N, 11 * N
         self._rd, self._rs = 15 * N, 15 * N + Md * N  # first dynamic / static obstacle row
-        self._rf = self._rs + Ks * N  # first field-of-view row (2 per step)
-        self._rc = self._rf + 2 * N  # first comfort row (Md per step), then N rows sc_k >= 0
+        # inert rows and columns (2 N rows, Md N + N rows and N columns sc_k >= 0 that nothing uses), left
+        # in this commit only so that OSQP's numerics stay those of the previous one; the next removes them
+        self._rf = self._rs + Ks * N
+        self._rc = self._rf + 2 * N
         self._rg = self._rc + Md * N + N  # first geofence row (4 per step: x >= lo, -x >= -hi, y >= lo, -y >= -hi)
         self.m = self._rg + 4 * N
         ix = 6 * np.arange(N)  # column of p_k (k = 1..N)
@@ -181,7 +153,7 @@ class MPC:
         d[self._iu:self._isd].reshape(N, 3)[:] = (2 * c.w_acc + 2 * c.w_jerk * (1 + (np.arange(N) < N - 1)))[:, None]
         d[self._isd:self._iss] = 2 * c.w_slack_quad
         d[self._iss:self._isc] = 2 * c.w_slack_quad * c.static_slack_scale
-        d[self._isc:] = 2 * c.w_comfort_quad
+        d[self._isc:] = 2 * 100.0  # inert
         ju = (iu[:-1, None] + np.arange(3)).ravel()
         self.P = sp.csc_matrix((np.r_[d, np.full(len(ju), -2 * c.w_jerk)],
                                 (np.r_[np.arange(self.n), ju], np.r_[np.arange(self.n), ju + 3])), (self.n, self.n))
@@ -215,10 +187,10 @@ class MPC:
         rs = self._rs + Ks * kk + np.arange(Ks)[None, :, None]
         sta = add(rs + 0 * i[None], ix[:, None, None] + i[None], 0.0)
         add(rs[..., 0], self._iss + kk[..., 0] + 0 * np.arange(Ks), 1.0)
-        rf = self._rf + 2 * kk + np.arange(2)[None, :, None]  # (N, 2, 1) rows; columns v_x, v_y of x_{k+1}
-        fov = add(rf + 0 * i[None, :, :2], ix[:, None, None] + 3 + i[None, :, :2], 0.0)
+        rf = self._rf + 2 * kk + np.arange(2)[None, :, None]
+        add(rf + 0 * i[None, :, :2], ix[:, None, None] + 3 + i[None, :, :2], 0.0)
         rc = self._rc + Md * kk + np.arange(Md)[None, :, None]
-        com = add(rc + 0 * i[None], ix[:, None, None] + i[None], 0.0)
+        add(rc + 0 * i[None], ix[:, None, None] + i[None], 0.0)
         add(rc[..., 0], self._isc + kk[..., 0] + 0 * np.arange(Md), 1.0)
         add(self._rc + Md * N + np.arange(N), self._isc + np.arange(N), 1.0)
         rg = self._rg + 4 * kk[..., 0] + np.arange(4)  # (N, 4)
@@ -231,8 +203,6 @@ class MPC:
         pos = np.argsort(order)  # COO entry -> CSC slot
         A.data = V[order]  # explicit zeros stay in the pattern
         self._Ax0, self._dyn_pos, self._sta_pos = A.data.copy(), pos[dyn], pos[sta]  # (N, Md, 3), (N, Ks, 3)
-        self._fov_pos = pos[fov]  # (N, 2, 2)
-        self._com_pos = pos[com]  # (N, Md, 3)
         self._vmax = vmax = np.array([c.v_max_xy, c.v_max_xy, c.v_max_z])
         self._amax = amax = np.array([c.a_max_xy, c.a_max_xy, c.a_max_z])
         vb = vmax - c.backoff
@@ -458,43 +428,11 @@ class MPC:
             dead |= (n @ PT) <= nq[:, None] + 1e-9  # points behind the plane through q: covered
         return n_out, b_out
 
-    def _relaxed_bound(self, now: float, bound: float, K: int) -> np.ndarray:
-        """Upper bounds (K,) for steps 1..K of a velocity row whose value at the start is ``now``: ``bound``,
-        plus the start's excess over it shrinking at half the acceleration limit per step (a start beyond
-        the bound is let back in gradually instead of making the QP infeasible)."""
-        cfg = self.cfg
-        excess = max(now - bound, 0.0)
-        return bound + np.maximum(excess - 0.5 * cfg.a_max_xy * cfg.dt * np.arange(1, K + 1), 0.0)
-
-    def _fov_rows(self, heading, v0):
-        """(6): rows (K, 2, 2) and upper bounds (K,) keeping the horizontal velocity of steps 1..K inside
-        the cone of half-angle fov_half_angle around the heading, up to fov_free_speed in any direction:
-        (+-n - tan(th) h) . v <= eps. A start outside the cone may return to it at half the acceleration
-        limit (the bound relaxes by the excess, shrinking step by step), so the constraint never makes the
-        QP infeasible by itself."""
-        cfg = self.cfg
-        K = min(cfg.fov_steps, self.N)
-        h = np.array([math.cos(heading), math.sin(heading)])
-        n = np.array([-h[1], h[0]])
-        tt = math.tan(cfg.fov_half_angle)
-        rows = np.array([n - tt * h, -n - tt * h])
-        return np.broadcast_to(rows, (K, 2, 2)), self._relaxed_bound(float(np.max(rows @ v0[:2])), cfg.fov_free_speed, K)
-
-    def _backward_rows(self, heading, v0):
-        """(6'): -h . v_k <= max_backward_speed for the first fov_steps steps, relaxed like (6) from a start
-        already reversing faster."""
-        cfg = self.cfg
-        K = min(cfg.fov_steps, self.N)
-        h = np.array([math.cos(heading), math.sin(heading)])
-        return np.broadcast_to(-h, (K, 2)), self._relaxed_bound(float(-h @ v0[:2]), cfg.max_backward_speed, K)
-
     def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None,
-              heading: float | None = None, geofence=None, guide=None) -> MPCResult:
+              geofence=None, guide=None) -> MPCResult:
         """One receding-horizon plan from (position, velocity) at time t0; see the module docstring.
-        heading: the camera's current yaw [rad]; with it (and fov_half_angle set) the first fov_steps
-        velocities stay inside the camera's horizontal view (constraint 6).
         geofence: (lo (2,), hi (2,)) the known walls of the flight area in x, y (a corridor's), or None;
-        every planned position keeps geofence_margin inside it, on the static slack (7).
+        every planned position keeps geofence_margin inside it, on the static slack (6).
         guide: (N, 3) positions of a motion chosen beforehand (planner.maneuvers), or None: the obstacles
         are linearised at it instead of at the previous plan, and the passing sides are the guide's (no
         side enumeration (4'), no tie-break offset), and no half-space asks for more room than the guide
@@ -539,7 +477,7 @@ class MPC:
         q[self._iu:self._iu + 3] = -2 * cfg.w_jerk * a0
         q[self._isd:self._iss] = cfg.w_slack_lin
         q[self._iss:self._isc] = cfg.w_slack_lin * cfg.static_slack_scale
-        q[self._isc:] = cfg.w_comfort_lin
+        q[self._isc:] = 10.0  # inert
         l, u = self._l0.copy(), self._u0.copy()
         l[:3] = u[:3] = p0 + dt * v0
         l[3:6] = u[3:6] = v0
@@ -567,14 +505,6 @@ class MPC:
             ns[~np.isfinite(bs)], bs[~np.isfinite(bs)] = 0.0, -np.inf  # overflow from absurd inputs: row unused
             Ax0 = self._Ax0.copy()
             Ax0[self._sta_pos] = ns
-            if heading is not None and cfg.fov_half_angle is not None and math.isfinite(heading):
-                fr, fb = self._fov_rows(heading, v0)
-                Ax0[self._fov_pos[:len(fb)]] = fr
-                u[self._rf:self._rf + 2 * len(fb)] = np.repeat(fb, 2)
-            elif heading is not None and cfg.max_backward_speed is not None and math.isfinite(heading):
-                fr, fb = self._backward_rows(heading, v0)
-                Ax0[self._fov_pos[:len(fb), 0]] = fr
-                u[self._rf:self._rf + 2 * len(fb):2] = fb
             l[self._rs:self._rf] = bs.ravel()
             combos, enum_ids = ([None], []) if guided else self._side_combinations(c, cand, obs)
             best, zw0, yw0 = None, zw, yw
@@ -587,9 +517,6 @@ class MPC:
                 Ax = Ax0.copy()
                 Ax[self._dyn_pos[:, :J]] = nd
                 l[self._rd:self._rs].reshape(N, -1)[:, :J] = bd
-                if cfg.comfort_margin > 0:
-                    Ax[self._com_pos[:, :J]] = nd
-                    l[self._rc:self._rc + cfg.max_dynamic * N].reshape(N, -1)[:, :J] = bd + cfg.comfort_margin
                 solver, z0, y0, key = self.solver, zw0, yw0, None
                 if forced is not None:  # each passing-side pattern keeps its own solver and warm start
                     key = tuple(float(forced[j]) for j, _ in sorted(enum_ids, key=lambda e: str(e[1])))

@@ -306,7 +306,7 @@ class MPCPlanner:
             hi = np.array([inp.position[0] + r, inp.position[1] + r, zc + h])
             static = occ.occupied_centers(lo, hi)
         res = self.mpc.solve(inp.stamp, inp.position, inp.velocity, inp.acceleration, p_ref, v_ref,
-                             obstacles=inp.obstacles, static_points=static, heading=inp.yaw,
+                             obstacles=inp.obstacles, static_points=static,
                              geofence=inp.geofence if self.cfg.use_geofence else None, guide=guide)
         traj = res.trajectory
         if guide is not None:
