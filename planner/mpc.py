@@ -148,8 +148,7 @@ class MPC:
         qx[:, 3:] = -2 * cfg.w_vel * v_ref
         q[qp.iu:qp.iu + 3] = -2 * cfg.w_jerk * a0
         q[qp.isd:qp.iss] = cfg.w_slack_lin
-        q[qp.iss:qp.isc] = cfg.w_slack_lin * cfg.static_slack_scale
-        q[qp.isc:] = 10.0  # inert
+        q[qp.iss:] = cfg.w_slack_lin * cfg.static_slack_scale
         const = (cfg.w_pos * np.sum(p_ref[:-1] ** 2) + cfg.w_terminal * np.sum(p_ref[-1] ** 2)
                  + cfg.w_vel * np.sum(v_ref ** 2) + cfg.w_jerk * np.sum(a0 ** 2))
         return q, const
@@ -220,7 +219,7 @@ class MPC:
                 cost = cost * (1.0 + cfg.homotopy_hysteresis) + cfg.homotopy_hysteresis_abs
             if best is None or cost < best[0]:
                 best = (cost, np.array(res.x), np.array(res.y), nd, bd, forced, (solver, Ax, l.copy(), loose))
-            if i == 0 and max(np.max(res.x[qp.isd:qp.iss]), np.max(res.x[qp.isc:])) <= cfg.homotopy_trigger:
+            if i == 0 and np.max(res.x[qp.isd:qp.iss]) <= cfg.homotopy_trigger:
                 break  # the side kept costs no slack worth speaking of: the others are not tried
         if best is not None:
             self._sides = {} if best[5] is None else {k: float(best[5][j]) for j, k in enum_ids if k is not None}
@@ -283,7 +282,7 @@ class MPC:
             ns[~np.isfinite(bs)], bs[~np.isfinite(bs)] = 0.0, -np.inf  # overflow from absurd inputs: row unused
             Ax0 = qp.Ax0.copy()
             Ax0[qp.sta_pos] = ns
-            l[qp.rs:qp.rf] = bs.ravel()
+            l[qp.rs:qp.rg] = bs.ravel()
             best, it, nh, why = self._solve_sides(t0, p0, c, cand, obs, guided, q, l, u, Ax0, zw, yw, const)
             iters, n_hom = iters + it, n_hom + nh
             if best is None:

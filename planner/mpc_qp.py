@@ -27,14 +27,10 @@ class QPLayout:
     def __init__(self, cfg: MPCConfig):
         self.cfg = c = cfg
         N, Md, Ks, dt = c.horizon, c.max_dynamic, c.static_per_step, c.dt
-        self.N, self.n = N, 12 * N
-        self.iu, self.isd, self.iss, self.isc = 6 * N, 9 * N, 10 * N, 11 * N
+        self.N, self.n = N, 11 * N
+        self.iu, self.isd, self.iss = 6 * N, 9 * N, 10 * N
         self.rd, self.rs = 15 * N, 15 * N + Md * N  # first dynamic / static obstacle row
-        # inert rows and columns (2 N rows, Md N + N rows and N columns sc_k >= 0 that nothing uses), left
-        # in this commit only so that OSQP's numerics stay those of the previous one; the next removes them
-        self.rf = self.rs + Ks * N
-        self.rc = self.rf + 2 * N
-        self.rg = self.rc + Md * N + N  # first geofence row
+        self.rg = self.rs + Ks * N  # first geofence row
         self.m = self.rg + 4 * N
         ix = 6 * np.arange(N)  # column of p_k (k = 1..N)
         iu = self.iu + 3 * np.arange(N)  # column of u_k (k = 0..N-1)
@@ -45,8 +41,7 @@ class QPLayout:
         d[:6 * N].reshape(N, 6)[:, 3:] = 2 * c.w_vel
         d[self.iu:self.isd].reshape(N, 3)[:] = (2 * c.w_acc + 2 * c.w_jerk * (1 + (np.arange(N) < N - 1)))[:, None]
         d[self.isd:self.iss] = 2 * c.w_slack_quad
-        d[self.iss:self.isc] = 2 * c.w_slack_quad * c.static_slack_scale
-        d[self.isc:] = 2 * 100.0  # inert
+        d[self.iss:] = 2 * c.w_slack_quad * c.static_slack_scale
         ju = (iu[:-1, None] + np.arange(3)).ravel()
         self.P = sp.csc_matrix((np.r_[d, np.full(len(ju), -2 * c.w_jerk)],
                                 (np.r_[np.arange(self.n), ju], np.r_[np.arange(self.n), ju + 3])), (self.n, self.n))
@@ -80,12 +75,6 @@ class QPLayout:
         rs = self.rs + Ks * kk + np.arange(Ks)[None, :, None]
         sta = add(rs + 0 * i[None], ix[:, None, None] + i[None], 0.0)
         add(rs[..., 0], self.iss + kk[..., 0] + 0 * np.arange(Ks), 1.0)
-        rf = self.rf + 2 * kk + np.arange(2)[None, :, None]
-        add(rf + 0 * i[None, :, :2], ix[:, None, None] + 3 + i[None, :, :2], 0.0)
-        rc = self.rc + Md * kk + np.arange(Md)[None, :, None]
-        add(rc + 0 * i[None], ix[:, None, None] + i[None], 0.0)
-        add(rc[..., 0], self.isc + kk[..., 0] + 0 * np.arange(Md), 1.0)
-        add(self.rc + Md * N + np.arange(N), self.isc + np.arange(N), 1.0)
         rg = self.rg + 4 * kk[..., 0] + np.arange(4)  # (N, 4)
         add(rg, ix[:, None] + np.array([0, 0, 1, 1]), c.geofence_scale * np.array([1.0, -1.0, 1.0, -1.0]))
         add(rg, self.iss + kk[..., 0] + 0 * np.arange(4), 1.0)
@@ -103,13 +92,11 @@ class QPLayout:
         vb = vmax - c.backoff
         lb = np.tile(np.r_[-vb, c.z_min + c.backoff, -amax, 0.0, 0.0], N)
         ub = np.tile(np.r_[vb, c.z_max - c.backoff, amax, np.inf, np.inf], N)
-        self.l0 = np.r_[np.zeros(6 * N), lb, np.full(self.rc + Md * N - 15 * N, -np.inf), np.zeros(N),
-                        np.full(4 * N, -np.inf)]
+        self.l0 = np.r_[np.zeros(6 * N), lb, np.full(self.m - 15 * N, -np.inf)]
         self.u0 = np.r_[np.zeros(6 * N), ub, np.full(self.m - 15 * N, np.inf)]
         # per-step blocks (offset, width) of z and of the duals y, for shifting a solution in time
-        self.xblocks = [(0, 6), (self.iu, 3), (self.isd, 1), (self.iss, 1), (self.isc, 1)]
-        self.yblocks = [(0, 6), (6 * N, 9), (self.rd, Md), (self.rs, Ks), (self.rf, 2), (self.rc, Md),
-                        (self.rc + Md * N, 1), (self.rg, 4)]
+        self.xblocks = [(0, 6), (self.iu, 3), (self.isd, 1), (self.iss, 1)]
+        self.yblocks = [(0, 6), (6 * N, 9), (self.rd, Md), (self.rs, Ks), (self.rg, 4)]
 
     def new_solver(self) -> osqp.OSQP:
         """An OSQP instance set up on this structure (q = 0, constant bounds) with the config's settings."""
