@@ -2,11 +2,10 @@
 and several futures of every moving obstacle; the best one guides the MPC.
 
 Why: the linear MPC (planner.mpc) linearises each obstacle at its previous plan, so whether it passes
-a person left or right, waits, backs off or goes on is inherited from that plan and a tie-break rule.
-In the corridor episodes that failed with perfect all-around perception, the plan switched sides every
-few replans near a person, and the drone ended up crossing the person's way or pressed against a
-wall. That choice is combinatorial, and a sampled set of whole motions, each scored over the
-horizon, makes it well (sampling-based local planners and Intent-MPC's one solve per intent do the same).
+a person left or right, waits, backs off or goes on is inherited from that plan and a tie-break rule,
+and the plan can switch sides from one replan to the next. That choice is combinatorial, and a sampled
+set of whole motions, each scored over the horizon, makes it well (sampling-based local planners and
+Intent-MPC's one solve per intent do the same).
 
 Candidates: from the current state, a target velocity u1 held until t_switch, then a second target u2
 until the horizon's end; each target is reached as fast as the MPC's per-axis acceleration limit allows,
@@ -14,9 +13,8 @@ so a candidate is a piecewise-constant-acceleration trajectory the MPC can fly. 
 the frame of the guiding direction (along the global path toward the goal, and left of it). Besides
 them: the previous choice flown again, and, within approach_range of the point where the cost-to-go
 is least (the goal, or the reachable cell nearest it), an approach that flies straight there and stops.
-The grid's targets move at least 0.5 m/s for a second, so without the approach a drone that stopped
-0.1-0.9 m short of a goal near a wall had no candidate that ends nearer: it hovered there until the
-episode timed out (all 7 oracle timeouts of corridor seeds 0-199 at frame latency 1, and dodt seed 195).
+The grid's targets move at least 0.5 m/s for a second, so without the approach a drone stopped a
+fraction of a metre short of a goal near a wall would have no candidate that ends nearer.
 
 Futures of a moving obstacle (hypotheses h, prior weights pi_h): the prediction it came with (constant
 acceleration, then constant velocity), stopping, or turning toward one of 7 other headings 45 degrees
@@ -79,16 +77,14 @@ class ManeuverConfig:
     t_full_alt: float = 1.2  # s of full weight on the other futures...
     t_fade_alt: float = 0.8  # ...then fading like the prediction's
     max_extent: float = 0.7  # m: an obstacle's radius is half its longest horizontal side, at most half this (a
-    # walker's box grows with the stride and the swinging arms: 0.93 m measured; contacts in the corridor
-    # episodes happened 0.4-0.7 m from the box centre, drone centre included)
+    # walker's box grows with the stride and the swinging arms, beyond the body that can be hit)
     w_keep: float = 2.0  # per m^2, commitment to the previous choice
     keep_steps: int = 10  # over the first steps
     w_acc: float = 0.01  # per (m/s^2)^2
     band_half_height: float = 0.45  # m: static columns count within the flight altitude +- this
     near_goal: float = 1.0  # m: within this of the goal the static thresholds are no stricter than the goal allows
     # m: the approach candidate (straight to where the cost-to-go is least, stopping there) is offered within
-    # this of that point only. Offered everywhere it flew the drone straighter and faster through the people
-    # (corridor dodt seeds 0-65: 33 successes against 44 without it, median speed 1.45 against 1.31 m/s)
+    # this of that point only; farther out the grid's candidates, which score the people's futures, lead
     approach_range: float = 2.0
 
 

@@ -44,20 +44,16 @@ class NavigatorConfig:
     # With maneuvers the heading is chosen to keep in the camera's view both where the drone goes (the chosen
     # maneuver heading_look_time ahead, weighted by its speed) and the moving obstacles that will be within
     # watch_range of the drone at watch_times (weighted more the closer they will be): a forward camera that
-    # turns away from a person it is avoiding loses the track (corridor seed 0, dodt: the drone backed away
-    # from a person 1.1 m off, turned its camera 60 degrees away, the track coasted out, and the person
-    # walked back into view 0.9 m away). Headings every 5 degrees; cost: how far each bearing lies outside
-    # the half field of view less fov_margin, times its weight, plus a small pull toward the motion.
+    # turns away from a person it is avoiding loses that person's track. Headings every 5 degrees; cost: how
+    # far each bearing lies outside the half field of view less fov_margin, times its weight, plus a small
+    # pull toward the motion.
     heading_look_time: float = 1.0  # s
     camera_half_fov: float = 0.759  # rad: the D435's 43.5 degrees (sim/camera)
     fov_margin: float = 0.15  # rad
     watch_range: float = 3.0  # m
     # s: the obstacles are watched where they and the drone will be at these times (bearing from the drone's
     # planned position to the obstacle's predicted one, weighted by that distance): what the drone is leaving
-    # behind stops pulling the camera round. Watching them from where the drone is now, at 0 s and
-    # heading_look_time (the earlier rule), a walker just passed, close behind, outweighed the motion: on
-    # corridor seed 126 (dodt) the drone flew on at 2 m/s with its camera turned 80-90 degrees from its motion,
-    # toward him, lost the person ahead of it and flew into her
+    # behind stops pulling the camera round, away from what lies ahead
     watch_times: tuple[float, ...] = (0.5, 1.0)
     mpc: MPCConfig = field(default_factory=MPCConfig)
 
@@ -306,7 +302,7 @@ class MPCPlanner:
             hi = np.array([inp.position[0] + r, inp.position[1] + r, zc + h])
             static = occ.occupied_centers(lo, hi)
         res = self.mpc.solve(inp.stamp, inp.position, inp.velocity, inp.acceleration, p_ref, v_ref,
-                             obstacles=inp.obstacles, static_points=static, heading=inp.yaw,
+                             obstacles=inp.obstacles, static_points=static,
                              geofence=inp.geofence if self.cfg.use_geofence else None, guide=guide)
         traj = res.trajectory
         if guide is not None:

@@ -1,0 +1,155 @@
+"""Half-space rows of the MPC's obstacle constraints (planner.mpc's module docstring, (4) and (5)).
+
+Moving obstacles: tangent planes of each predicted ellipsoid at the radial projection of the
+linearisation point c_k, after the tie-break offset that picks the passing side. Occupied voxels:
+greedy separating planes from c_k. Every function takes the MPCConfig and the linearisation points
+c (N, 3) and returns unit normals and right-hand sides (n . p_k >= b).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from planner.mpc_config import MPCConfig
+
+
+def tie_break(cfg: MPCConfig, d, side, forced=None, bias=None):
+    """Offsets d (N, J, 3) from obstacle j to c_k whose component along side[j] is below side_bias get
+    it raised to side_bias (on their side, left if 0): a symmetric head-on plan would otherwise only
+    ever brake or push through on slack. Any tangent plane is conservative. `side`: left of the
+    obstacle's velocity relative to the planned motion (relative_side), else left of travel.
+    forced (J,) in {-1, 0, +1}: where non-zero, the offset is put on that side (mirrored across the
+    line if it lies on the other), so every plane asks the plan to pass the obstacle there."""
+    lat = np.sum(d * side, axis=-1)
+    sgn = np.where(lat < 0, -1.0, 1.0)
+    if forced is not None:
+        sgn = np.where(forced != 0, forced, sgn)
+    bias = cfg.side_bias if bias is None else bias
+    return d + (sgn * np.maximum(np.abs(lat), bias) - lat)[..., None] * side
+
+
+def dynamic_candidates(cfg: MPCConfig, c, obstacles, side, v_plan=None):
+    """The obstacles (4) applies to, nearest first: (distance from the plan to the ellipsoid, index in
+    `obstacles`, predicted centres (N, 3), semi-axes (N, 3), tie-break side (3,)), at most max_dynamic."""
+    N = cfg.horizon
+    t = cfg.dt * np.arange(1, N + 1)
+    cand = []
+    for idx, ob in enumerate(obstacles):
+        sd = side
+        if cfg.relative_side and v_plan is not None:
+            vo = np.asarray(ob.velocity, dtype=float)
+            vr = (vo - v_plan)[:2]
+            if np.hypot(*vr) > 0.2:
+                sd = np.array([-vr[1], vr[0], 0.0]) / np.hypot(*vr)
+                lead = float(sd @ vo)  # the tie goes behind the obstacle; left of travel if it is neither
+                sd = -sd if lead > 0.05 or (lead >= -0.05 and float(sd @ side) < 0) else sd
+        o = ob.predict(t)
+        half = np.asarray(ob.size, dtype=float) / 2 + cfg.robot_radius + cfg.dynamic_margin
+        ax = np.repeat(half[None], N, axis=0)
+        ax[:, :2] += cfg.z_std * ob.std_at(t)[:, None]
+        dist = float(np.min(np.linalg.norm(c - o, axis=1) - ax.max(axis=1)))  # to the ellipsoid, roughly
+        if dist <= cfg.dynamic_range:
+            cand.append((dist, idx, o, ax, sd))
+    return sorted(cand, key=lambda e: e[:2])[:cfg.max_dynamic]
+
+
+def dynamic_rows(cfg: MPCConfig, c, cand, p0, forced=None, bias=None):
+    """(4): unit normals (N, J, 3) and right-hand sides (N, J) for the candidates (dynamic_candidates);
+    forced (J,): the side each must be passed on (0: the tie-break rule's)."""
+    N = cfg.horizon
+    if not cand:
+        return np.zeros((N, 0, 3)), np.zeros((N, 0))
+    o = np.stack([e[2] for e in cand], axis=1)  # (N, J, 3)
+    ax = np.stack([e[3] for e in cand], axis=1)
+    side = np.stack([e[4] for e in cand])  # (J, 3)
+    # an ellipsoid spanning the whole altitude band (a person) is treated as its elliptic cylinder:
+    # horizontal normals, so the plan goes around it rather than climbing along its shoulder
+    tall = ((o[..., 2] - ax[..., 2] <= cfg.z_min) & (o[..., 2] + ax[..., 2] >= cfg.z_max))[..., None]
+    flat = np.where(tall, np.array([1.0, 1.0, 0.0]), 1.0)
+    d = tie_break(cfg, (c[:, None, :] - o) * flat, side, forced, bias)
+    away = (p0 - o) * flat  # c_k at the centre (only with side_bias = 0): toward the drone, else +y
+    away = np.where(np.linalg.norm(away, axis=-1, keepdims=True) > 1e-9, away, np.array([0.0, 1.0, 0.0]))
+    d = np.where(np.linalg.norm(d, axis=-1, keepdims=True) < 1e-9, away, d)
+    cs = o + d / np.sqrt(np.sum((d / ax) ** 2, axis=-1, keepdims=True))  # on the surface
+    g = (cs - o) / ax ** 2
+    n = g / np.linalg.norm(g, axis=-1, keepdims=True)
+    return n, np.sum(n * cs, axis=-1)
+
+
+def slide_clear(cfg: MPCConfig, c, PT, d2, req, side):
+    """Move each c_k along +-side (the shorter way, left on ties) to the nearest spot at least req from
+    every point; q blocks the shifts sgn*(q - c).side +- sqrt(req^2 - |q - c|_perp^2) (d2 = |q - c|^2).
+    Where no spot lies within static_radius, c_k stays."""
+    along = (side @ PT)[None] - (c @ side)[:, None]
+    perp2 = d2 - along ** 2
+    keep = np.any(perp2 < req * req, axis=0)
+    along, perp2 = along[:, keep], perp2[:, keep]
+    h = np.sqrt(np.maximum(req * req - perp2, 0.0))
+    shift = []
+    for sgn in (1.0, -1.0):
+        lo = np.where(perp2 < req * req, sgn * along - h, np.inf)
+        hi = np.where(perp2 < req * req, sgn * along + h, -np.inf)
+        d = np.zeros(len(c))
+        for _ in range(20):
+            cover = (lo < d[:, None]) & (hi > d[:, None])
+            if not cover.any():
+                break
+            d = np.where(cover.any(axis=1), np.max(np.where(cover, hi, -np.inf), axis=1) + 1e-6, d)
+        shift.append(np.where(cover.any(axis=1), np.inf, d))
+    s = np.where(shift[0] <= shift[1], shift[0], -shift[1])
+    return c + np.where(np.abs(s) <= cfg.static_radius, s, 0.0)[:, None] * side
+
+
+def static_rows(cfg: MPCConfig, c, pts, side, p0):
+    """(5): greedy separating planes, normals (N, Ks, 3) (zeros where unused) and rhs (N, Ks).
+    Written for numpy speed on thousands of points: matrix products against the contiguous (3, M)
+    transpose, masks combined as booleans, never a masked float assignment."""
+    N, Ks = cfg.horizon, cfg.static_per_step
+    n_out, b_out = np.zeros((N, Ks, 3)), np.full((N, Ks), -np.inf)
+    r, req = cfg.static_radius, cfg.robot_radius + cfg.voxel_size / 2 + cfg.static_margin
+    pts = pts[np.all((pts >= c.min(axis=0) - r) & (pts <= c.max(axis=0) + r), axis=1)]
+    if len(pts) == 0:
+        return n_out, b_out
+    PT = np.ascontiguousarray(pts.T)
+    sq = np.sum(PT * PT, axis=0)[None]
+
+    def sqdist(c):  # (K, M) |c_k - q|^2, in place (large temporaries cost page faults)
+        d = c @ PT
+        d *= -2.0
+        d += sq
+        d += np.sum(c * c, axis=1)[:, None]
+        return d
+
+    d2 = sqdist(c)
+    pen = np.min(d2, axis=1) < req * req
+    if pen.any():  # the previous plan runs through voxels there: linearise beside them instead
+        c = c.copy()
+        c[pen] = slide_clear(cfg, c[pen], PT, d2[pen], req, side)
+        d2[pen] = sqdist(c[pen])
+    dead = d2 > r * r
+    rows, key = np.arange(N), np.empty_like(d2)
+    for j in range(Ks):
+        np.multiply(dead, 1e30, out=key)
+        key += d2
+        idx = np.argmin(key, axis=1)
+        use = ~dead[rows, idx]
+        if not use.any():
+            break
+        q = pts[idx]
+        nv = c - q
+        # A linearisation point beyond the voxel, seen from the drone (the previous plan went through a
+        # wall on slack), would give a plane keeping the plan beyond the wall: where the straight
+        # line from the drone to c_k passes within the clearance of q, orient the plane from the
+        # drone's position instead, which is on the free side. (A plan through a gap passes its
+        # edge voxels farther than that and keeps its planes.)
+        seg = c - p0
+        w = np.clip(np.sum((q - p0) * seg, axis=1) / np.maximum(np.sum(seg * seg, axis=1), 1e-12), 0.0, 1.0)
+        crosses = np.linalg.norm(p0 + w[:, None] * seg - q, axis=1) < req
+        behind = crosses & (np.sum(nv * (p0 - q), axis=1) < 0.0)
+        nv[behind] = (p0 - q)[behind]
+        nn = np.linalg.norm(nv, axis=1)
+        nv[nn < 1e-9], nn[nn < 1e-9] = side, 1.0  # c_k on a voxel centre (no clear spot found): left
+        n = nv / nn[:, None]
+        nq = np.sum(n * q, axis=1)
+        n_out[use, j], b_out[use, j] = n[use], nq[use] + req
+        dead |= (n @ PT) <= nq[:, None] + 1e-9  # points behind the plane through q: covered
+    return n_out, b_out
