@@ -19,29 +19,33 @@ def wall_pass():
 
 
 def _ids_while_passing_the_wall(tracks, truth, x_range=(3.5, 5.5)):
-    """The dynamic track matched (within 0.5 m) to the person in each frame while the person
-    walks past the wall (x = 4.5), and how many such frames there were."""
-    ids, frames = [], 0
+    """Per pass of the wall (x = 4.5; a pass: consecutive frames with the person within x_range), the
+    set of dynamic tracks within 0.5 m of the person in each frame; and how many such frames there were."""
+    passes, frames, inside = [], 0, False
     for frame_tracks, people in zip(tracks, truth):
         (_, px, py), = people
         if not x_range[0] <= px <= x_range[1]:
+            inside = False
             continue
+        if not inside:
+            passes.append([])
+            inside = True
         frames += 1
-        near = [(np.hypot(x - px, y - py), tid) for tid, x, y, dyn in frame_tracks if dyn]
-        if near and min(near)[0] <= 0.5:
-            ids.append(min(near)[1])
-    return ids, frames
+        passes[-1].append({tid for tid, x, y, dyn in frame_tracks if dyn and np.hypot(x - px, y - py) <= 0.5})
+    return passes, frames
 
 
 def test_person_passing_a_wall_keeps_its_id_and_the_wall_stays_static(wall_pass):
     summary, tracks, truth = wall_pass
     s = summary["dodt"]
-    ids, frames = _ids_while_passing_the_wall(tracks["dodt"], truth)
-    assert frames > 50 and len(ids) > 0.8 * frames
-    # one id on each pass of the wall (the person walks back and forth: a new pass after the
-    # person has left the 5.5 m range may bring a new track, never a change during a pass)
-    switches = [(a, b) for a, b in zip(ids, ids[1:]) if a != b]
-    assert len(switches) <= 1
+    passes, frames = _ids_while_passing_the_wall(tracks["dodt"], truth)
+    assert len(passes) >= 2 and frames > 50
+    # one track follows the person through each pass of the wall, in nearly every frame (the person
+    # walks back and forth: a new pass after the person has left the 3.5-5.5 m range may bring a new
+    # track, never a change during a pass)
+    for near in passes:
+        held = max(set().union(*near), key=lambda tid: sum(tid in n for n in near))
+        assert sum(held in n for n in near) >= 0.9 * len(near), near
     assert s["false_dynamic"] == 0  # the wall is never reported dynamic
     assert s["recall"] > 0.8
     assert s["pos_err"] < 0.12

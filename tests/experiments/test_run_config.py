@@ -27,7 +27,7 @@ def test_sections_apply_to_their_configurations():
 
     s = build(None, ["shield.a_brake=3", "navigator.mpc.horizon=30", "navigator.cruise_speed=1.2", "map.p_hit=0.75",
                      "dodt.kalman.q_pos=0.02", "dodt.ensemble.detectors=[\"udepth\"]", "episode.plan_rate=5",
-                     "navigator.mpc.fov_half_angle=none"])
+                     "episode.duration=none"])
     p = default_planner(0.43, s)
     assert p.cfg.a_brake == 3.0 and isinstance(p.cfg.a_brake, float) and p.cfg.drone_radius == 0.43
     assert p.planner.cfg.mpc.horizon == 30 and p.planner.cfg.cruise_speed == 1.2 and p.planner.cfg.mpc.robot_radius == 0.43
