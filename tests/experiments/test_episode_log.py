@@ -50,6 +50,7 @@ def _traced_peak(fn) -> int:
         tracemalloc.stop()
 
 
+@pytest.mark.slow
 def test_writing_a_long_log_keeps_no_record_in_memory(tmp_path):
     """An hour at 120 Hz is 432,000 state records; 100,000 here. Kept in memory they took about 2.3 MiB
     per simulated second; streamed, what is allocated does not grow with their number."""
