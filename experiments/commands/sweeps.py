@@ -1,0 +1,230 @@
+"""Many episodes: `sweep` (seeds of one scenario), `benchmark nav` (families x perception x people on a seed
+split), `compare` (two sweeps seed by seed) and `reproduce` (the paper's tables and the corridor sweeps)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from sim.scenario import ScenarioError, load_scenario
+
+from experiments.commands.common import (PERCEPTION_HELP, LazyText, UserError, add_command,
+                                         add_config_options, add_episode_options, builtin_names, check_perception,
+                                         check_planner, default_jobs, episode_config, examples, fraction, jobs,
+                                         output_folder, real, settings, whole, writable_file)
+
+SWEEP_EXAMPLES = examples(
+    "dodt-nav sweep corridor --seeds 0:100 --out runs/sweep",
+    "dodt-nav sweep head_on --perception oracle --map truth --max-at-fault-rate 0.05 --junit junit.xml --out runs/ci",
+    "dodt-nav sweep corridor --planner examples/custom_planner.py:StraightLine --out runs/mine",
+)
+
+
+def add_parser(sub) -> None:
+    w = add_command(
+        sub, "sweep", help="run many seeds in parallel; resumable; rates with Wilson intervals; CI gate",
+        description="Fly one scenario over many seeds in parallel (--jobs processes, or a Dask cluster) with one "
+                    "perception mode and planner. Each episode's summary is appended to OUT/results.jsonl as it "
+                    "ends, so rerunning the same command resumes where a killed sweep stopped; failed episodes "
+                    "keep their logs. Prints and writes (summary.json, summary.md) the success, at-fault "
+                    "collision, not-at-fault-only and timeout rates with 95 % Wilson intervals; as a CI gate, "
+                    "exits with status 1 when a --max-*-rate is exceeded.",
+        epilog=LazyText(lambda: SWEEP_EXAMPLES + "\n\n" + builtin_names()), func=cmd_sweep)
+    w.add_argument("scenario", help="a scenario file, or the name of a shipped one")
+    w.add_argument("--seeds", default="0:20", help="start:stop, a number, or a comma list (default 0:20)")
+    w.add_argument("--perception", default="dodt", help=PERCEPTION_HELP)
+    w.add_argument("--jobs", type=jobs, default=default_jobs(), help="parallel episodes (default: CPUs)")
+    w.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
+    w.add_argument("--max-collision-rate", type=fraction, default=None,
+                   help="exit with status 1 when the rate of episodes with any collision exceeds this fraction")
+    w.add_argument("--max-at-fault-rate", type=fraction, default=None,
+                   help="exit with status 1 when the rate of episodes with an at-fault collision exceeds this fraction")
+    w.add_argument("--junit", default=None, help="write JUnit XML, one test case per seed")
+    w.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
+    w.add_argument("--keep-logs", action="store_true", help="keep the episode logs of successful episodes too")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_episode_options(w)
+
+    bm = add_command(
+        sub, "benchmark", help="the navigation benchmark: scenario families x perception modes x people who do or "
+                               "do not see the drone, on a named seed split; report.md",
+        description="The closed-loop navigation benchmark: every shipped scenario family, flown with each "
+                    "perception mode, among people who do not see the drone (blind) and who do (aware), on the "
+                    "first --seeds seeds of a named split: dev (seeds 0-999) for tuning and choosing, test (seeds "
+                    "1000-1999) for reported figures. Each cell is a resumable sweep under OUT/; OUT/report.md and "
+                    "report.json give per cell the success, at-fault, not-at-fault-only and timeout rates with "
+                    "95 % Wilson intervals, and OUT/plots/ one figure per family.",
+        epilog=LazyText(lambda: examples(
+            "dodt-nav benchmark nav --quick --out runs/bench_smoke",
+            "dodt-nav benchmark nav --split test --seeds 100 --out runs/bench_test",
+            "dodt-nav benchmark nav --families corridor,crossing --perception dodt,examples/custom_perception.py:NearDODT "
+            "--people blind --out runs/mine",
+        ) + "\n\n" + _families() + "\n\n" + builtin_names()),
+        func=cmd_benchmark)
+    bm.add_argument("what", choices=("nav",), help="nav: the closed-loop navigation benchmark")
+    bm.add_argument("--split", choices=("dev", "test"), default="dev",
+                    help="dev: seeds 0-999, for tuning and choosing; test: seeds 1000-1999, for reported figures")
+    bm.add_argument("--seeds", type=whole(1, 1000), default=100, help="seeds per cell, the first of the split (default 100)")
+    bm.add_argument("--families", default=None, help="comma list (default: all shipped families)")
+    bm.add_argument("--perception", default=None, help="comma list of modes or module:Class plug-ins "
+                                                        "(default: dodt,oracle,static-only)")
+    bm.add_argument("--people", default="blind,aware",
+                    help="blind (people do not see the drone), aware (they do), or both (default)")
+    bm.add_argument("--jobs", type=jobs, default=default_jobs(), help="parallel episodes (default: CPUs)")
+    bm.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
+    bm.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
+    bm.add_argument("--quick", action="store_true",
+                    help="smoke-sized: 2 seeds, corridor and head_on, oracle on the known map (unless given)")
+    bm.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_episode_options(bm)
+
+    cp = add_command(
+        sub, "compare", help="pair two sweeps seed by seed: seeds turned each way, exact sign test; "
+                             "CI gate on a significant regression",
+        description="Compare two sweeps of the same scenario and seeds (a baseline and a change) seed by seed: "
+                    "which seeds turned from success to failure and which the other way, and the exact two-sided "
+                    "sign test (McNemar's) on those; seeds with the same outcome in both say nothing about the "
+                    "change. Two success rates alone cannot tell a real gain from the churn of small changes; "
+                    "the paired test can. As a CI gate, --fail-if-worse exits with status 1 on a significant "
+                    "regression.",
+        epilog=examples("dodt-nav compare runs/base runs/new",
+                        "dodt-nav compare runs/base/results.jsonl runs/new/results.jsonl --fail-if-worse 0.05"),
+        func=cmd_compare)
+    cp.add_argument("base", help="the baseline's sweep folder (or its results.jsonl)")
+    cp.add_argument("new", help="the change's sweep folder (or its results.jsonl)")
+    cp.add_argument("--fail-if-worse", type=real(0.0, 1.0, lo_open=True, what="must be a significance level in (0, 1]"),
+                    default=None, metavar="ALPHA",
+                    help="exit with status 1 when more seeds turned to failure than to success and the sign "
+                         "test's p is below ALPHA (e.g. 0.05)")
+
+    rep = add_command(
+        sub, "reproduce", help="Table I, Table II and the corridor sweeps in one report.md",
+        description="Reproduce the paper's results in one go: the perception benchmark (Table I), the runtime "
+                    "benchmark (Table II) and the corridor navigation sweeps (dodt, oracle, static-only), written "
+                    "to OUT/report.md with the figures embedded and the paper's numbers beside ours. Rerunning "
+                    "with the same folder resumes the sweeps. --quick shrinks every part to finish in minutes; "
+                    "its figures are a smoke test, not results.",
+        epilog=examples("dodt-nav reproduce --quick --out runs/reproduce_quick",
+                        "dodt-nav reproduce --out runs/reproduce --jobs 8",
+                        "dodt-nav reproduce --out runs/reproduce_brake3 --set shield.a_brake=3.0"),
+        func=cmd_reproduce)
+    rep.add_argument("--out", required=True, help="output folder (rerun to resume the sweeps)")
+    rep.add_argument("--quick", action="store_true", help="a small version that finishes in minutes")
+    rep.add_argument("--jobs", type=jobs, default=default_jobs(), help="parallel episodes")
+    add_config_options(rep)
+
+
+def _families() -> str:
+    from experiments.benchmark import FAMILIES
+    from experiments.commands.common import name_list
+
+    return name_list("scenario families (--families; default all)", FAMILIES)
+
+
+def cmd_sweep(args) -> int:
+    from experiments import sweep
+
+    load_scenario(args.scenario)  # validate before starting workers
+    check_perception(args.perception)
+    planner = check_planner(args.planner)
+    config = settings(args)
+    cfg = episode_config(args, config)
+    if args.junit:
+        writable_file(args.junit, "--junit")
+    try:
+        seeds = sweep.parse_seeds(args.seeds)
+        agg = sweep.run_sweep(args.scenario, seeds, args.perception, Path(args.out), jobs=args.jobs,
+                              dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet, cfg=cfg,
+                              settings=config, planner=planner)
+    except sweep.SweepError as e:
+        raise UserError(str(e)) from None
+    r = agg["rates"]
+
+    def rate(k):
+        return f"{100 * r[k]['rate']:.1f} % [{100 * r[k]['ci95'][0]:.1f}, {100 * r[k]['ci95'][1]:.1f}]"
+
+    print(f"{agg['scenario']} / {agg['perception']}" + (f" / {agg['planner']}" if planner else "")
+          + f": {agg['episodes']} episodes; success {rate('success')}, "
+          f"at-fault collision {rate('at_fault')}, only not-at-fault collisions {rate('not_at_fault_only')}, "
+          f"timeout {rate('timeout')}")
+    print(f"wrote {args.out}/summary.json, {args.out}/summary.md")
+    if args.junit:
+        by_seed = sweep.read_results(Path(args.out) / sweep.RESULTS)
+        Path(args.junit).write_text(sweep.junit(agg, by_seed))
+        print(f"wrote {args.junit}")
+    status = 0
+    for key, limit in (("collision", args.max_collision_rate), ("at_fault", args.max_at_fault_rate)):
+        if limit is not None and r[key]["rate"] > limit:
+            what = "at-fault collision" if key == "at_fault" else "collision"
+            print(f"{what} rate {r[key]['rate']:.4f} exceeds --max-{key.replace('_', '-')}-rate {limit}",
+                  file=sys.stderr)
+            status = 1
+    return status
+
+
+def cmd_benchmark(args) -> int:
+    from experiments import benchmark
+    from experiments.sweep import SweepError
+
+    def names(text, known, option):
+        out = [x.strip() for x in text.split(",") if x.strip()]
+        bad = [repr(x) for x in out if known is not None and x not in known]
+        if not out or bad:
+            raise UserError(f"--{option}: {bad[0] if bad else repr(text)} is not one of {', '.join(known)}"
+                            if known else f"--{option}: {text!r} names nothing")
+        return tuple(out)
+
+    families = names(args.families, None, "families") if args.families else benchmark.FAMILIES
+    for f in families:
+        try:
+            load_scenario(f)  # validate before starting workers
+        except ScenarioError as e:
+            raise UserError(f"--families: {e}") from None
+    modes = names(args.perception, None, "perception") if args.perception else benchmark.MODES
+    for m in modes:
+        check_perception(m)
+    people = names(args.people, tuple(benchmark.PEOPLE), "people")
+    planner = check_planner(args.planner)
+    config = settings(args)
+    count, given = args.seeds, {}
+    if args.quick:  # a smoke-sized run: two families, the oracle on the known map (unless given), two seeds
+        families = families if args.families else ("corridor", "head_on")
+        modes = modes if args.perception else ("oracle",)
+        count = min(count, 2)
+        if args.map is None and "static_map" not in dict(config.episode):
+            given["static_map"] = "truth"
+    cfg = episode_config(args, config, **given)
+    try:
+        report = benchmark.run_benchmark(Path(args.out), args.split, count, families, modes, people, jobs=args.jobs,
+                                         dask_address=args.dask, cfg=cfg, progress=not args.quiet,
+                                         settings=config, planner=planner)
+    except SweepError as e:
+        raise UserError(str(e)) from None
+    print(benchmark.markdown(report))
+    print(f"wrote {args.out}/report.md, {args.out}/report.json and {args.out}/plots/")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison
+
+    try:
+        c = compare_sweeps(args.base, args.new)
+    except CompareError as e:
+        raise UserError(str(e)) from None
+    print(format_comparison(c))
+    worse = len(c.to_failure) > len(c.to_success)
+    if args.fail_if_worse is not None and worse and c.p_value < args.fail_if_worse:
+        print(f"the change is worse than the baseline: p = {c.p_value:.3g} < --fail-if-worse {args.fail_if_worse}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from experiments.reproduce import reproduce
+
+    planner = check_planner(args.planner)
+    config = settings(args)
+    output_folder(args.out)
+    reproduce(Path(args.out), quick=args.quick, jobs=args.jobs, settings=config, planner=planner)
+    return 0
