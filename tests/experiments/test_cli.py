@@ -91,3 +91,45 @@ def test_sweep_renderer_option_reaches_every_episode(monkeypatch, tmp_path, rend
     args = ["sweep", "corridor", "--seeds", "0:2", "--out", str(tmp_path)] + (["--renderer", renderer] if renderer else [])
     assert main(args) == 0
     assert seen == [renderer]
+
+
+COMMANDS = ("run", "simulate", "perceive", "replay", "plot", "collisions", "sweep", "benchmark", "compare",
+            "reproduce", "bench", "scenarios", "validate", "train-detector", "eval-detector", "pack-detector-data")
+
+
+def test_every_command_is_listed_in_the_help(capsys):
+    from experiments.cli import main
+
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert "examples:" in out
+    for name in COMMANDS:
+        assert f"\n    {name} " in out
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_each_command_help_has_a_description_and_examples(capsys, command):
+    from experiments.cli import main
+
+    assert main([command, "--help"]) == 0
+    out = capsys.readouterr().out
+    usage, description = out.split("\n\n")[:2]
+    assert usage.startswith(f"usage: dodt-nav {command}")
+    assert len(description.split()) >= 20  # a paragraph, before the options
+    examples = out.split("\nexamples:\n")[1].split("\n\n")[0].splitlines()
+    assert 1 <= len(examples) <= 3 and all(line.startswith("  dodt-nav ") for line in examples)
+
+
+@pytest.mark.parametrize("command", ["run", "sweep", "benchmark"])
+def test_episode_commands_help_lists_modes_presets_and_the_planner(capsys, command):
+    from dodt.presets import PRESETS
+    from experiments.cli import main
+    from experiments.perception_modes import known_modes
+    from experiments.plugins import DEFAULT_PLANNER
+
+    assert main([command, "--help"]) == 0
+    epilog = capsys.readouterr().out.split("\nexamples:\n")[1]
+    listed = " ".join(epilog.split())  # names wrapped over lines
+    for name in known_modes() + tuple(PRESETS):
+        assert f" {name}," in listed or f" {name} " in listed or listed.endswith(f" {name}")
+    assert f"built-in planner (--planner): {DEFAULT_PLANNER} (" in listed
