@@ -4,8 +4,9 @@ replay built afterwards from its log.
 - ``LiveViewer``: starts a meshcat server bound to 127.0.0.1 (or connects to one given its zmq
   url), prints the viewer's address and, passed as ``run_episode(on_frame=...)``, draws each
   camera frame: the drone, its executed and planned trajectories, the global path, perception's
-  boxes (red: dynamic, with velocity arrows; blue-grey: static), the people with their last 3 s
-  of track, the depth point cloud and the occupied voxels. Heavy updates are throttled in sim time.
+  boxes (red: dynamic, with velocity arrows; blue-grey: static), the people (orange) with their
+  last 3 s of track, the goal (green), the depth point cloud and the occupied voxels. Heavy
+  updates are throttled in sim time.
 - ``build_replay_html(log, out_html)``: the same scene animated from an episode log alone (no
   simulator, no server), as one HTML page with meshcat's viewer inlined: it opens offline.
 
@@ -41,8 +42,10 @@ CAMERA_OFFSET = (-0.35, -0.4, 0.6)  # the viewpoint from mid-corridor, in corrid
 TRAIL_S = 3.0  # s of people's track drawn behind them (the paper's figures)
 # Flat (unlit) colours for the drone and the floor, so a screenshot can be checked for them.
 DRONE_RGB, FLOOR_RGB = (255, 0, 255), (200, 180, 120)
-WALL, OBSTACLE, PERSON = 0xD9D2C0, 0x8C7B6B, 0x2CA02C
-DYNAMIC, STATIC, ARROW = 0xE02020, 0x5A78A0, 0xFF7F00
+# People orange, far from the goal's green; their velocity arrows take the dynamic tracks' red.
+WALL, OBSTACLE, PERSON, GOAL = 0xD9D2C0, 0x8C7B6B, 0xFF8C00, 0x30FF30
+DYNAMIC, STATIC = 0xE02020, 0x5A78A0
+ARROW = DYNAMIC
 EXECUTED, PLANNED, GLOBAL_PATH, CLOUD = 0xFFD700, 0x00C8FF, 0xFFFFFF, 0xB0C4FF
 
 
@@ -128,7 +131,7 @@ def draw_static_scene(vis, corridor, static_boxes, goal=None) -> None:
         s["obstacles"][str(i)].set_object(g.Box((hi - lo).tolist()), g.MeshLambertMaterial(color=OBSTACLE))
         s["obstacles"][str(i)].set_transform(_translation((lo + hi) / 2))
     if goal is not None:
-        s["goal"].set_object(g.Sphere(0.15), g.MeshLambertMaterial(color=0x30FF30, opacity=0.7))
+        s["goal"].set_object(g.Sphere(0.15), g.MeshLambertMaterial(color=GOAL, opacity=0.7))
         s["goal"].set_transform(_translation(goal))
     # The viewer's camera orbits the viewer's origin: shift the scene so that it is mid-corridor.
     # The camera rig is Y-up under /Cameras/default/rotated: offset (x, y, z) is (x, z, -y) there.
@@ -345,7 +348,7 @@ class LiveViewer:
                 continue
             node = self.vis["people"][str(o.id)]
             if o.id not in self._people:
-                node.set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.5))
+                node.set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.7))
                 self._people.add(o.id)
             node.set_transform(_translation(o.center, np.maximum(o.size, 1e-3)))
             trail = self._trails.setdefault(o.id, [])
@@ -437,8 +440,8 @@ def build_replay_html(log_path, out_html, fps: float = 15.0, max_tracks: int = 1
     header, end = records[0], next((r for r in reversed(records) if r["k"] == "end"), None)
     legend = html.escape(f"{header.get('scenario')} seed {header.get('seed')}, perception {header.get('perception')}"
                          f"{'' if end is None else ', ' + str(end.get('reason'))}")
-    legend += (" &middot; drone magenta, executed yellow, plan cyan, global path white, people green, "
-               "tracks red (dynamic) / blue (static), voxels by height")
+    legend += (" &middot; drone magenta, executed yellow, plan cyan, global path white, people orange, "
+               "goal green, tracks red (dynamic) / blue (static), voxels by height")
     js = _VIEWER_JS.read_text(encoding="utf-8").replace("</script", "<\\/script")
     commands = ",".join(f'"{base64.b64encode(c).decode("ascii")}"' for c in vis.window.commands)
     out_html = Path(out_html)
@@ -476,7 +479,7 @@ def _replay_animation(vis, records: list[dict], frames: list[dict], fps: float, 
     last 3 s, dots along the current plan, perception boxes in slots shown and hidden."""
     n_plan_dots, n_trail_dots = 12, 10
     for pid in sorted({p["id"] for f in frames for p in f["people"]}):
-        vis["people"][str(pid)].set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.5))
+        vis["people"][str(pid)].set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.7))
         for j in range(n_trail_dots):
             vis["people_trails"][f"{pid}_{j}"].set_object(g.Sphere(0.04), g.MeshBasicMaterial(color=PERSON))
     for j in range(n_plan_dots):

@@ -105,6 +105,19 @@ def test_replay_screenshot_in_headless_chromium_shows_corridor_and_drone(replay,
     assert _drone_pixels(blank) < 30 and _floor_pixels(blank) < 500  # (a few from the legend's text)
 
 
+def _rgb(hex_string: str) -> np.ndarray:
+    return np.array([int(hex_string[i:i + 2], 16) for i in (0, 2, 4)], float)
+
+
+def test_replay_people_are_not_coloured_like_the_goal(replay):
+    mats = {c["path"]: c["object"]["materials"][0]["color"] for c in _commands(replay.read_text(encoding="utf-8"))
+            if c["type"] == "set_object" and c["path"] in ("/meshcat/people/5", "/meshcat/scene/goal")}
+    person, goal = (_rgb(f"{mats[p]:06x}") for p in ("/meshcat/people/5", "/meshcat/scene/goal"))
+    assert np.abs(person - goal).max() >= 150  # orange against green: red differs by over half its range
+    legend = replay.read_text(encoding="utf-8").split('<div id="legend">')[1].split("</div>")[0]
+    assert "people orange" in legend and "goal green" in legend
+
+
 def test_replay_bad_input_names_the_file(tmp_path):
     missing = tmp_path / "nope.jsonl.gz"
     with pytest.raises(FileNotFoundError, match="nope.jsonl.gz"):
