@@ -8,7 +8,9 @@ replay built afterwards from its log.
   last 3 s of track, the goal (green), the depth point cloud and the occupied voxels. Heavy
   updates are throttled in sim time.
 - ``build_replay_html(log, out_html)``: the same scene animated from an episode log alone (no
-  simulator, no server), as one HTML page with meshcat's viewer inlined: it opens offline.
+  simulator, no server), as one HTML page with meshcat's viewer inlined: it opens offline. A
+  player bar at the bottom of the page (play/pause, a time slider, the episode time; the space
+  bar plays and pauses) drives meshcat's animator, whose own controls sit in its collapsed GUI.
 
 Both draw through the same functions onto a ``meshcat.Visualizer``; the replay's visualizer
 records the packed commands instead of sending them, and the page replays them in order.
@@ -392,15 +394,48 @@ _VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
 _PAGE = """<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{title}</title>
 <style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
-#legend {{ position: absolute; left: 8px; bottom: 8px; font: 12px sans-serif; color: #fff;
-  background: rgba(0, 0, 0, 0.45); padding: 4px 8px; border-radius: 4px; pointer-events: none; }}</style>
-</head><body><div id="meshcat-pane"></div><div id="legend">{legend}</div>
+#hud {{ position: absolute; left: 8px; right: 8px; bottom: 8px; display: flex; flex-direction: column;
+  align-items: flex-start; gap: 4px; font: 12px sans-serif; color: #fff; pointer-events: none; }}
+#hud > div {{ background: rgba(0, 0, 0, 0.55); padding: 4px 8px; border-radius: 4px; box-sizing: border-box; }}
+#player {{ display: flex; align-items: center; gap: 8px; width: 100%; max-width: 720px; pointer-events: auto; }}
+#player button {{ width: 5em; font: 12px sans-serif; cursor: pointer; }}
+#player input {{ flex: 1; min-width: 80px; margin: 0; cursor: pointer; }}
+#player span {{ font-variant-numeric: tabular-nums; white-space: nowrap; }}</style>
+</head><body><div id="meshcat-pane"></div>
+<div id="hud"><div id="player"><button id="play-pause" type="button">Play</button>
+<input id="time-slider" type="range" min="0" max="0" step="0.001" value="0" aria-label="episode time">
+<span id="time-label">t = 0.00 s</span></div><div id="legend">{legend}</div></div>
 <script>{viewer_js}</script>
 <script>
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 function unpack(s) {{ var b = atob(s), a = new Uint8Array(b.length);
   for (var i = 0; i < b.length; i++) a[i] = b.charCodeAt(i); return a; }}
 [{commands}].forEach(function (c) {{ viewer.handle_command_bytearray(unpack(c)); }});
+</script>
+<script>
+(function () {{  // the player bar, wired to meshcat's animator (play, pause, seek, time, duration)
+  var anim = viewer.animator, t0 = {t0}, button = document.getElementById("play-pause"),
+      slider = document.getElementById("time-slider"), label = document.getElementById("time-label");
+  function toggle() {{
+    if (anim.playing) {{ anim.pause(); return; }}
+    if (anim.time >= anim.duration - 1e-6) {{ anim.reset(); }}
+    anim.play();
+  }}
+  button.addEventListener("click", toggle);
+  slider.addEventListener("input", function () {{
+    var t = parseFloat(slider.value); anim.seek(t); anim.display_progress(t); }});
+  document.addEventListener("keydown", function (e) {{
+    if (e.key === " " && e.target.tagName !== "INPUT" && e.target.tagName !== "BUTTON") {{
+      e.preventDefault(); toggle(); }} }});
+  function show() {{
+    slider.max = anim.duration.toFixed(3);
+    slider.value = anim.time;
+    button.textContent = anim.playing ? "Pause" : "Play";
+    label.textContent = "t = " + (t0 + anim.time).toFixed(2) + " / " + (t0 + anim.duration).toFixed(2) + " s";
+    requestAnimationFrame(show);
+  }}
+  show();
+}})();
 </script></body></html>
 """
 
@@ -448,7 +483,8 @@ def build_replay_html(log_path, out_html, fps: float = 15.0, max_tracks: int = 1
     out_html.parent.mkdir(parents=True, exist_ok=True)
     tmp = out_html.with_name(out_html.name + ".part")
     tmp.write_text(_PAGE.format(title=html.escape(f"dodt-nav replay: {header.get('scenario')}"), legend=legend,
-                                viewer_js=js, commands=commands), encoding="utf-8")
+                                viewer_js=js, commands=commands, t0=f"{float(frames[0]['t']):.3f}"),
+                   encoding="utf-8")
     os.replace(tmp, out_html)
     return out_html
 
