@@ -11,7 +11,8 @@
   of episode summaries writes ``sweep_outcomes.png`` (counts with 95 % Wilson intervals),
   ``sweep_time_to_goal.png``, ``sweep_min_clearance.png`` and ``sweep_per_seed.png``.
 - ``plot_runtime_table(rows, out_png)``: a Table-II-like horizontal bar chart of
-  (module, median ms, p95 ms[, paper ms]) rows.
+  (module, median ms, p95 ms[, paper ms]) rows, its legend under the axes
+  (``runtime_table_figure`` builds the figure without saving it).
 
 Headless: figures are ``matplotlib.figure.Figure`` objects rendered by the Agg canvas, never
 registered with pyplot (no global backend switch, nothing left open after saving). File names are
@@ -353,17 +354,25 @@ def plot_runtime_table(rows, out_png, title: str | None = None, paper_label: str
     bar is the median, the whisker reaches the p95. ``rows``: [(module, median_ms, p95_ms), ...], each
     optionally with a 4th item, the paper's milliseconds (drawn as a diamond; None for none), or a dict
     {module: {"median_ms", "p95_ms"}} as ``experiments.bench_perception.run_runtime`` returns. Returns out_png."""
+    return _save(runtime_table_figure(rows, title, paper_label), Path(out_png))
+
+
+def runtime_table_figure(rows, title: str | None = None, paper_label: str = "paper (Intel NUC)"):
+    """The figure ``plot_runtime_table`` saves (same arguments), not yet drawn. Its legend is a figure
+    legend in a row of its own under the x label, outside the axes: it covers no bar, value label,
+    tick label or title, however long the labels are."""
     if isinstance(rows, dict):
         rows = [(m, v["median_ms"], v["p95_ms"]) for m, v in rows.items()]
     rows = [tuple(r) for r in rows]
     if any(len(r) not in (3, 4) for r in rows):
         raise ValueError("plot_runtime_table: each row must be (module, median_ms, p95_ms[, paper_ms])")
     n = len(rows)
-    fig, ax = new_figure((8, max(2.2, 0.45 * n + 1.4)))
     if n == 0:
+        fig, ax = new_figure((8, 2.2))
         _message(ax, "no runtime rows")
         ax.set_title(title or "runtime per call", fontsize=9)
-        return _save(fig, Path(out_png))
+        return fig
+    fig, ax = new_figure((8, max(2.2, 0.45 * n + 1.4) + 0.3))  # + the legend's row
     names = [str(r[0]) for r in rows]
     med = np.array([np.nan if r[1] is None else float(r[1]) for r in rows])
     p95 = np.array([np.nan if r[2] is None else float(r[2]) for r in rows])
@@ -387,9 +396,12 @@ def plot_runtime_table(rows, out_png, title: str | None = None, paper_label: str
     ax.invert_yaxis()  # first row on top, as in a table
     ax.set_xlim(0, xmax * 1.3)
     ax.set_xlabel("milliseconds per call (bar: median, whisker: p95; labels: median / p95)")
-    ax.legend(fontsize=7, loc="lower right")
+    handles, labels = ax.get_legend_handles_labels()
+    order = sorted(range(len(labels)), key=lambda i: {"median": 0, "p95": 1}.get(labels[i], 2))
+    fig.legend([handles[i] for i in order], [labels[i] for i in order], loc="outside lower center",
+               ncol=len(handles), fontsize=7, frameon=False)
     ax.set_title(title or "runtime per call, laid out like the paper's Table II", fontsize=9)
-    return _save(fig, Path(out_png))
+    return fig
 
 
 # --------------------------------------------------------------------------- sweep

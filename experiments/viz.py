@@ -4,10 +4,13 @@ replay built afterwards from its log.
 - ``LiveViewer``: starts a meshcat server bound to 127.0.0.1 (or connects to one given its zmq
   url), prints the viewer's address and, passed as ``run_episode(on_frame=...)``, draws each
   camera frame: the drone, its executed and planned trajectories, the global path, perception's
-  boxes (red: dynamic, with velocity arrows; blue-grey: static), the people with their last 3 s
-  of track, the depth point cloud and the occupied voxels. Heavy updates are throttled in sim time.
+  boxes (red: dynamic, with velocity arrows; blue-grey: static), the people (orange) with their
+  last 3 s of track, the goal (green), the depth point cloud and the occupied voxels. Heavy
+  updates are throttled in sim time.
 - ``build_replay_html(log, out_html)``: the same scene animated from an episode log alone (no
-  simulator, no server), as one HTML page with meshcat's viewer inlined: it opens offline.
+  simulator, no server), as one HTML page with meshcat's viewer inlined: it opens offline. A
+  player bar at the bottom of the page (play/pause, a time slider, the episode time; the space
+  bar plays and pauses) drives meshcat's animator, whose own controls sit in its collapsed GUI.
 
 Both draw through the same functions onto a ``meshcat.Visualizer``; the replay's visualizer
 records the packed commands instead of sending them, and the page replays them in order.
@@ -41,8 +44,10 @@ CAMERA_OFFSET = (-0.35, -0.4, 0.6)  # the viewpoint from mid-corridor, in corrid
 TRAIL_S = 3.0  # s of people's track drawn behind them (the paper's figures)
 # Flat (unlit) colours for the drone and the floor, so a screenshot can be checked for them.
 DRONE_RGB, FLOOR_RGB = (255, 0, 255), (200, 180, 120)
-WALL, OBSTACLE, PERSON = 0xD9D2C0, 0x8C7B6B, 0x2CA02C
-DYNAMIC, STATIC, ARROW = 0xE02020, 0x5A78A0, 0xFF7F00
+# People orange, far from the goal's green; their velocity arrows take the dynamic tracks' red.
+WALL, OBSTACLE, PERSON, GOAL = 0xD9D2C0, 0x8C7B6B, 0xFF8C00, 0x30FF30
+DYNAMIC, STATIC = 0xE02020, 0x5A78A0
+ARROW = DYNAMIC
 EXECUTED, PLANNED, GLOBAL_PATH, CLOUD = 0xFFD700, 0x00C8FF, 0xFFFFFF, 0xB0C4FF
 
 
@@ -128,7 +133,7 @@ def draw_static_scene(vis, corridor, static_boxes, goal=None) -> None:
         s["obstacles"][str(i)].set_object(g.Box((hi - lo).tolist()), g.MeshLambertMaterial(color=OBSTACLE))
         s["obstacles"][str(i)].set_transform(_translation((lo + hi) / 2))
     if goal is not None:
-        s["goal"].set_object(g.Sphere(0.15), g.MeshLambertMaterial(color=0x30FF30, opacity=0.7))
+        s["goal"].set_object(g.Sphere(0.15), g.MeshLambertMaterial(color=GOAL, opacity=0.7))
         s["goal"].set_transform(_translation(goal))
     # The viewer's camera orbits the viewer's origin: shift the scene so that it is mid-corridor.
     # The camera rig is Y-up under /Cameras/default/rotated: offset (x, y, z) is (x, z, -y) there.
@@ -345,7 +350,7 @@ class LiveViewer:
                 continue
             node = self.vis["people"][str(o.id)]
             if o.id not in self._people:
-                node.set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.5))
+                node.set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.7))
                 self._people.add(o.id)
             node.set_transform(_translation(o.center, np.maximum(o.size, 1e-3)))
             trail = self._trails.setdefault(o.id, [])
@@ -389,15 +394,48 @@ _VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
 _PAGE = """<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{title}</title>
 <style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
-#legend {{ position: absolute; left: 8px; bottom: 8px; font: 12px sans-serif; color: #fff;
-  background: rgba(0, 0, 0, 0.45); padding: 4px 8px; border-radius: 4px; pointer-events: none; }}</style>
-</head><body><div id="meshcat-pane"></div><div id="legend">{legend}</div>
+#hud {{ position: absolute; left: 8px; right: 8px; bottom: 8px; display: flex; flex-direction: column;
+  align-items: flex-start; gap: 4px; font: 12px sans-serif; color: #fff; pointer-events: none; }}
+#hud > div {{ background: rgba(0, 0, 0, 0.55); padding: 4px 8px; border-radius: 4px; box-sizing: border-box; }}
+#player {{ display: flex; align-items: center; gap: 8px; width: 100%; max-width: 720px; pointer-events: auto; }}
+#player button {{ width: 5em; font: 12px sans-serif; cursor: pointer; }}
+#player input {{ flex: 1; min-width: 80px; margin: 0; cursor: pointer; }}
+#player span {{ font-variant-numeric: tabular-nums; white-space: nowrap; }}</style>
+</head><body><div id="meshcat-pane"></div>
+<div id="hud"><div id="player"><button id="play-pause" type="button">Play</button>
+<input id="time-slider" type="range" min="0" max="0" step="0.001" value="0" aria-label="episode time">
+<span id="time-label">t = 0.00 s</span></div><div id="legend">{legend}</div></div>
 <script>{viewer_js}</script>
 <script>
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 function unpack(s) {{ var b = atob(s), a = new Uint8Array(b.length);
   for (var i = 0; i < b.length; i++) a[i] = b.charCodeAt(i); return a; }}
 [{commands}].forEach(function (c) {{ viewer.handle_command_bytearray(unpack(c)); }});
+</script>
+<script>
+(function () {{  // the player bar, wired to meshcat's animator (play, pause, seek, time, duration)
+  var anim = viewer.animator, t0 = {t0}, button = document.getElementById("play-pause"),
+      slider = document.getElementById("time-slider"), label = document.getElementById("time-label");
+  function toggle() {{
+    if (anim.playing) {{ anim.pause(); return; }}
+    if (anim.time >= anim.duration - 1e-6) {{ anim.reset(); }}
+    anim.play();
+  }}
+  button.addEventListener("click", toggle);
+  slider.addEventListener("input", function () {{
+    var t = parseFloat(slider.value); anim.seek(t); anim.display_progress(t); }});
+  document.addEventListener("keydown", function (e) {{
+    if (e.key === " " && e.target.tagName !== "INPUT" && e.target.tagName !== "BUTTON") {{
+      e.preventDefault(); toggle(); }} }});
+  function show() {{
+    slider.max = anim.duration.toFixed(3);
+    slider.value = anim.time;
+    button.textContent = anim.playing ? "Pause" : "Play";
+    label.textContent = "t = " + (t0 + anim.time).toFixed(2) + " / " + (t0 + anim.duration).toFixed(2) + " s";
+    requestAnimationFrame(show);
+  }}
+  show();
+}})();
 </script></body></html>
 """
 
@@ -437,15 +475,16 @@ def build_replay_html(log_path, out_html, fps: float = 15.0, max_tracks: int = 1
     header, end = records[0], next((r for r in reversed(records) if r["k"] == "end"), None)
     legend = html.escape(f"{header.get('scenario')} seed {header.get('seed')}, perception {header.get('perception')}"
                          f"{'' if end is None else ', ' + str(end.get('reason'))}")
-    legend += (" &middot; drone magenta, executed yellow, plan cyan, global path white, people green, "
-               "tracks red (dynamic) / blue (static), voxels by height")
+    legend += (" &middot; drone magenta, executed yellow, plan cyan, global path white, people orange, "
+               "goal green, tracks red (dynamic) / blue (static), voxels by height")
     js = _VIEWER_JS.read_text(encoding="utf-8").replace("</script", "<\\/script")
     commands = ",".join(f'"{base64.b64encode(c).decode("ascii")}"' for c in vis.window.commands)
     out_html = Path(out_html)
     out_html.parent.mkdir(parents=True, exist_ok=True)
     tmp = out_html.with_name(out_html.name + ".part")
     tmp.write_text(_PAGE.format(title=html.escape(f"dodt-nav replay: {header.get('scenario')}"), legend=legend,
-                                viewer_js=js, commands=commands), encoding="utf-8")
+                                viewer_js=js, commands=commands, t0=f"{float(frames[0]['t']):.3f}"),
+                   encoding="utf-8")
     os.replace(tmp, out_html)
     return out_html
 
@@ -476,7 +515,7 @@ def _replay_animation(vis, records: list[dict], frames: list[dict], fps: float, 
     last 3 s, dots along the current plan, perception boxes in slots shown and hidden."""
     n_plan_dots, n_trail_dots = 12, 10
     for pid in sorted({p["id"] for f in frames for p in f["people"]}):
-        vis["people"][str(pid)].set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.5))
+        vis["people"][str(pid)].set_object(g.Box([1, 1, 1]), g.MeshLambertMaterial(color=PERSON, opacity=0.7))
         for j in range(n_trail_dots):
             vis["people_trails"][f"{pid}_{j}"].set_object(g.Sphere(0.04), g.MeshBasicMaterial(color=PERSON))
     for j in range(n_plan_dots):

@@ -152,6 +152,45 @@ def test_runtime_table_accepts_rows_paper_values_and_bench_dicts(tmp_path):
         plot_runtime_table([("x", 1.0)], tmp_path / "bad.png")
 
 
+def _legend_clashes(fig, legend) -> list[str]:
+    """What the drawn ``legend`` overlaps among the axes' area (the data), its tick labels, title,
+    axis labels and value labels."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    canvas.draw()
+    r = canvas.get_renderer()
+    box = legend.get_window_extent(r)
+    ax = fig.axes[0]
+    named = [("axes area", ax.get_window_extent(r)), ("title", ax.title.get_window_extent(r)),
+             ("x label", ax.xaxis.label.get_window_extent(r))]
+    named += [(f"tick label {t.get_text()!r}", t.get_window_extent(r))
+              for t in ax.get_xticklabels() + ax.get_yticklabels() if t.get_visible() and t.get_text()]
+    named += [(f"value label {t.get_text()!r}", t.get_window_extent(r)) for t in ax.texts]
+    return [name for name, bb in named if bb.width > 0 and box.overlaps(bb)]
+
+
+@pytest.mark.parametrize("paper", [False, True])
+def test_runtime_legend_covers_no_label_title_or_data(paper):
+    from experiments.plots import runtime_table_figure
+
+    rows = [("perception (oracle) per frame (n=90)", 1.2, 2.0), ("map update (n=90)", 3.1, 4.0),
+            ("planner solve (n=30)", 9.0, 14.5)]
+    if paper:
+        rows = [r + (p,) for r, p in zip(rows, (1.0, 3.4, 1.3))]
+    fig = runtime_table_figure(rows, title="corridor seed 0: wall-clock per call, this machine")
+    assert len(fig.legends) == 1 and fig.axes[0].get_legend() is None
+    legend = fig.legends[0]
+    assert [t.get_text() for t in legend.get_texts()] == ["median", "p95"] + ["paper (Intel NUC)"] * paper
+    assert _legend_clashes(fig, legend) == []
+    inside = fig.bbox.padded(0.5)  # the whole legend is on the figure
+    box = legend.get_window_extent(fig.canvas.get_renderer())
+    assert inside.x0 <= box.x0 and box.x1 <= inside.x1 and inside.y0 <= box.y0 and box.y1 <= inside.y1
+    # The check finds the overlap of the legend this figure had before: in the axes' lower right corner.
+    old = fig.axes[0].legend(fontsize=7, loc="lower right")
+    assert "axes area" in _legend_clashes(fig, old) and "value label '9.00 / 14.50 ms'" in _legend_clashes(fig, old)
+
+
 def test_same_input_gives_the_same_png_and_leaves_no_figure_open(tmp_path):
     import matplotlib.pyplot as plt
 

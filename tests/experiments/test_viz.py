@@ -1,5 +1,6 @@
 """Viewers: the HTML replay built from a real episode log (checked offline and, where Chromium is
-installed, rendered headless and looked at), and the live viewer against a real meshcat server."""
+installed, rendered headless, looked at and played with its player bar), and the live viewer against a
+real meshcat server."""
 import base64
 import gzip
 import re
@@ -16,7 +17,7 @@ from experiments.viz import DRONE_RGB, FLOOR_RGB, LiveViewer, build_replay_html,
     stop_meshcat_server
 from sim import load_scenario
 
-from headless_chromium import screenshot
+from headless_chromium import QUIET_FLAGS, _Pipe, screenshot
 
 VIEWER_JS_BYTES = 900_000  # meshcat's main.min.js, inlined in every page
 
@@ -103,6 +104,89 @@ def test_replay_screenshot_in_headless_chromium_shows_corridor_and_drone(replay,
     blank = _screenshot(_chromium(), empty, tmp_path / "empty.png", tmp_path / "profile")
     assert len(np.unique(blank.reshape(-1, 3), axis=0)) <= 1500
     assert _drone_pixels(blank) < 30 and _floor_pixels(blank) < 500  # (a few from the legend's text)
+
+
+def _evaluate(chromium: str, page, profile, expression: str, width: int = 800, height: int = 600, timeout=60.0):
+    """Loads ``page`` in headless Chromium as ``screenshot`` does and returns the value of the JavaScript
+    ``expression`` (awaited when it is a promise; JSON-like values only)."""
+    args = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--hide-scrollbars",
+            f"--window-size={width},{height}", f"--user-data-dir={profile}", *QUIET_FLAGS, "about:blank"]
+    pipe = _Pipe(chromium, args)
+    try:
+        pages = [t for t in pipe.call("Target.getTargets", timeout=timeout)["targetInfos"] if t["type"] == "page"]
+        session = pipe.call("Target.attachToTarget", {"targetId": pages[0]["targetId"], "flatten": True})["sessionId"]
+        pipe.call("Page.enable", session=session)
+        pipe.call("Emulation.setDeviceMetricsOverride", {"width": width, "height": height, "deviceScaleFactor": 1,
+                                                         "mobile": False}, session=session)
+        pipe.call("Page.navigate", {"url": page.resolve().as_uri()}, session=session, timeout=timeout)
+        pipe.wait_event("Page.loadEventFired", session, timeout)
+        out = pipe.call("Runtime.evaluate", {"expression": expression, "awaitPromise": True, "returnByValue": True},
+                        session=session, timeout=timeout)
+        assert "exceptionDetails" not in out, out["exceptionDetails"]
+        return out["result"].get("value")
+    finally:
+        pipe.close()
+
+
+# Run in the page: whether each player control is on screen and on top (what a click there reaches),
+# then pause, seek to either end and play with them, reading meshcat's animator and the drone it moves.
+_PLAYER_CHECK = """(async () => {
+  const frames = n => new Promise(done => { const step = () => (--n > 0) ? requestAnimationFrame(step)
+                                                                          : done(); requestAnimationFrame(step); });
+  await frames(10);
+  const out = {controls: {}}, anim = viewer.animator;
+  for (const id of ["play-pause", "time-slider", "time-label"]) {
+    const el = document.getElementById(id), r = el.getBoundingClientRect(), st = getComputedStyle(el);
+    const top = document.elementFromPoint(r.left + r.width / 2, r.top + r.height / 2);
+    out.controls[id] = {w: r.width, h: r.height, inside: r.left >= 0 && r.top >= 0 && r.right <= innerWidth
+      && r.bottom <= innerHeight, shown: st.visibility === "visible" && st.display !== "none"
+      && parseFloat(st.opacity) > 0.5, on_top: top === el || el.contains(top)};
+  }
+  const drone = () => viewer.scene_tree.find(["meshcat", "drone"]).object.position.x;
+  const button = document.getElementById("play-pause"), slider = document.getElementById("time-slider");
+  out.playing_on_load = anim.playing; out.label_on_load = button.textContent;
+  out.duration = anim.duration; out.slider_max = parseFloat(slider.max);
+  button.click(); await frames(3);
+  out.paused = !anim.playing; out.label_paused = button.textContent;
+  const t = anim.time; await frames(10); out.time_held = anim.time === t;
+  const seek = v => { slider.value = v; slider.dispatchEvent(new Event("input")); };
+  seek(0); await frames(2); out.x_start = drone(); out.text_start = document.getElementById("time-label").textContent;
+  seek(slider.max); await frames(2); out.x_end = drone(); out.time_end = anim.time;
+  seek(0); button.click(); await frames(3); out.playing_again = anim.playing;
+  const mat = path => viewer.scene_tree.find(path.concat(["<object>"])).object.material.color.getHexString();
+  out.person_color = mat(["meshcat", "people", "5"]); out.goal_color = mat(["meshcat", "scene", "goal"]);
+  return out;
+})()"""
+
+
+def _rgb(hex_string: str) -> np.ndarray:
+    return np.array([int(hex_string[i:i + 2], 16) for i in (0, 2, 4)], float)
+
+
+def test_replay_people_are_not_coloured_like_the_goal(replay):
+    mats = {c["path"]: c["object"]["materials"][0]["color"] for c in _commands(replay.read_text(encoding="utf-8"))
+            if c["type"] == "set_object" and c["path"] in ("/meshcat/people/5", "/meshcat/scene/goal")}
+    person, goal = (_rgb(f"{mats[p]:06x}") for p in ("/meshcat/people/5", "/meshcat/scene/goal"))
+    assert np.abs(person - goal).max() >= 150  # orange against green: red differs by over half its range
+    legend = replay.read_text(encoding="utf-8").split('<div id="legend">')[1].split("</div>")[0]
+    assert "people orange" in legend and "goal green" in legend
+
+
+@pytest.mark.skipif(_chromium() is None, reason="no chromium binary (CI: apt-get install -y chromium)")
+def test_replay_player_controls_are_visible_and_drive_the_animation(replay, tmp_path):
+    out = _evaluate(_chromium(), replay, tmp_path / "profile", _PLAYER_CHECK)
+    for name, c in out["controls"].items():  # on screen at 800x600 when the page opens, not under the canvas
+        assert c["inside"] and c["shown"] and c["on_top"] and c["w"] >= 20 and c["h"] >= 10, (name, c)
+    assert out["playing_on_load"] and out["label_on_load"] == "Pause"
+    assert out["duration"] == pytest.approx(3 - 1 / 15, abs=0.01)  # 45 frames at 15 fps
+    assert out["slider_max"] == pytest.approx(out["duration"], abs=1e-3)
+    assert out["paused"] and out["label_paused"] == "Play" and out["time_held"]
+    assert out["time_end"] == pytest.approx(out["duration"], abs=1e-3)
+    assert out["x_end"] > out["x_start"] + 1.0  # seeking moves the drone down the corridor
+    assert re.fullmatch(r"t = 0\.\d\d / 2\.\d\d s", out["text_start"]), out["text_start"]
+    assert out["playing_again"]
+    # what the browser draws the people and the goal with
+    assert np.abs(_rgb(out["person_color"]) - _rgb(out["goal_color"])).max() >= 150, out
 
 
 def test_replay_bad_input_names_the_file(tmp_path):
