@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 
 from dodt.geometry import wrap_angle
-from experiments.episode_log import read_log
 
 HALF_FOV = math.radians(43.5)  # the D435's horizontal half field of view at 640x480 (sim/camera)
 
