@@ -13,6 +13,17 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
+def _step(px, py, vx, vy, ax, ay, lim, dt):
+    """One dt step with acceleration (ax, ay) clamped to norm lim: (px, py, vx, vy, ax, ay) after it."""
+    n = math.sqrt(ax * ax + ay * ay)
+    if n > lim:
+        ax, ay = ax * lim / n, ay * lim / n
+    px += vx * dt + 0.5 * ax * dt * dt
+    py += vy * dt + 0.5 * ay * dt * dt
+    return px, py, vx + ax * dt, vy + ay * dt, ax, ay
+
+
+@njit(cache=True, nogil=True)
 def _roll(p0, v0, targets, commit, N, dt, a_max, a_brake):
     """(P (C, N+1, 2), V (C, N+1, 2), A (C, N, 2)): from (p0, v0), target velocity targets[c] for commit[c]
     steps, then braking to rest (then resting)."""
@@ -26,13 +37,7 @@ def _roll(p0, v0, targets, commit, N, dt, a_max, a_brake):
                 ax, ay, lim = (targets[c, 0] - vx) / dt, (targets[c, 1] - vy) / dt, a_max
             else:
                 ax, ay, lim = -vx / dt, -vy / dt, a_brake
-            n = math.sqrt(ax * ax + ay * ay)
-            if n > lim:
-                ax, ay = ax * lim / n, ay * lim / n
-            px += vx * dt + 0.5 * ax * dt * dt
-            py += vy * dt + 0.5 * ay * dt * dt
-            vx += ax * dt
-            vy += ay * dt
+            px, py, vx, vy, ax, ay = _step(px, py, vx, vy, ax, ay, lim, dt)
             if k >= commit[c] and vx * vx + vy * vy < 1e-12:
                 vx = vy = 0.0
             A[c, k, 0], A[c, k, 1] = ax, ay
@@ -91,14 +96,7 @@ def _brake_from(P, V, k, N, dt, a_brake):
                 Ab[c, q - 1, 1] = (V[c, q, 1] - V[c, q - 1, 1]) / dt
         px, py, vx, vy = P[c, k, 0], P[c, k, 1], V[c, k, 0], V[c, k, 1]
         for q in range(k, N):
-            ax, ay = -vx / dt, -vy / dt
-            n = math.sqrt(ax * ax + ay * ay)
-            if n > a_brake:
-                ax, ay = ax * a_brake / n, ay * a_brake / n
-            px += vx * dt + 0.5 * ax * dt * dt
-            py += vy * dt + 0.5 * ay * dt * dt
-            vx += ax * dt
-            vy += ay * dt
+            px, py, vx, vy, ax, ay = _step(px, py, vx, vy, -vx / dt, -vy / dt, a_brake, dt)
             if vx * vx + vy * vy < 1e-12:
                 vx = vy = 0.0
             Ab[c, q, 0], Ab[c, q, 1] = ax, ay
@@ -108,7 +106,7 @@ def _brake_from(P, V, k, N, dt, a_brake):
 
 def backups(P, V, commit_time: float, dt: float, a_brake: float, v_max: float) -> Candidates:
     """Each candidate (P, V: (C, K+1, 2) with the start at index 0) flown for commit_time, then a stop:
-    the motion the drone commits to (planner.safe_planner)."""
+    the motion the drone commits to (planner.shield)."""
     k = int(round(commit_time / dt))
     N = horizon_steps((commit_time,), v_max, a_brake, dt)
     Pb, Vb, Ab = _brake_from(np.ascontiguousarray(P), np.ascontiguousarray(V), k, N, dt, a_brake)
