@@ -17,6 +17,26 @@ from scipy.ndimage import distance_transform_edt
 _SQRT2 = math.sqrt(2.0)
 
 
+@njit(cache=True, nogil=True)
+def block_discs(blocked, centres, radii, ox, oy, res):
+    """Marks in blocked (nx, ny) every cell whose centre, origin + (i + 0.5, j + 0.5) res, lies within
+    radii[m] of centres[m] (M, 2); discs off the grid, or not finite, mark nothing."""
+    nx, ny = blocked.shape
+    for m in range(centres.shape[0]):
+        cx, cy, r = centres[m, 0], centres[m, 1], radii[m]
+        if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r)):
+            continue
+        i0, j0 = max(math.floor((cx - r - ox) / res), 0.0), max(math.floor((cy - r - oy) / res), 0.0)
+        i1, j1 = min(math.floor((cx + r - ox) / res), nx - 1.0), min(math.floor((cy + r - oy) / res), ny - 1.0)
+        if i0 > i1 or j0 > j1:
+            continue
+        for i in range(int(i0), int(i1) + 1):
+            x = ox + (i + 0.5) * res
+            for j in range(int(j0), int(j1) + 1):
+                if math.hypot(x - cx, oy + (j + 0.5) * res - cy) <= r:
+                    blocked[i, j] = True
+
+
 @njit(cache=True)
 def _heap_push(heap_f, heap_i, n, f, i):
     heap_f[n] = f

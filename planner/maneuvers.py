@@ -121,25 +121,35 @@ class Maneuver:
 
 
 @njit(cache=True, nogil=True)
-def _two_phase(p0, v0, targets, ks, N, dt, amax, extra):
-    """Positions, velocities, accelerations (T*T + extra, N, 2) of every pair of targets (first held for ks
-    steps, the second after), each reached by bang-bang velocity tracking: every step the acceleration
-    that reaches the target velocity, clipped to +-amax per axis. The last ``extra`` rows are left for the
-    caller to fill."""
-    T = targets.shape[0]
-    P, V, A = np.empty((T * T + extra, N, 2)), np.empty((T * T + extra, N, 2)), np.empty((T * T + extra, N, 2))
+def _two_phase(P, V, A, p0, v0, targets, ks, dt, amax):
+    """Fills rows a * T + b of P, V, A (C, N, 2) (positions, velocities, accelerations) with every pair of
+    targets (a held for ks steps, then b), each reached by bang-bang velocity tracking: every step the
+    acceleration that reaches the target velocity, clipped to +-amax per axis. The first phase, the same
+    for every b, is computed once per a. Rows from T * T on are left to the caller."""
+    T, N = targets.shape[0], P.shape[1]
+    k1 = min(ks, N)
     for a in range(T):
-        for b in range(T):
-            c = a * T + b
-            for ax in range(2):
-                p, v = p0[ax], v0[ax]
-                for k in range(N):
-                    tv = targets[a, ax] if k < ks else targets[b, ax]
-                    acc = min(max((tv - v) / dt, -amax), amax)
-                    p += v * dt + 0.5 * acc * dt * dt
-                    v += acc * dt
-                    P[c, k, ax], V[c, k, ax], A[c, k, ax] = p, v, acc
-    return P, V, A
+        c0 = a * T
+        for ax in range(2):
+            p, v = p0[ax], v0[ax]
+            tv = targets[a, ax]
+            for k in range(k1):
+                acc = min(max((tv - v) / dt, -amax), amax)
+                p += v * dt + 0.5 * acc * dt * dt
+                v += acc * dt
+                P[c0, k, ax], V[c0, k, ax], A[c0, k, ax] = p, v, acc
+            for b in range(T):
+                c = c0 + b
+                if b > 0:
+                    for k in range(k1):
+                        P[c, k, ax], V[c, k, ax], A[c, k, ax] = P[c0, k, ax], V[c0, k, ax], A[c0, k, ax]
+                pb, vb = p, v
+                tv = targets[b, ax]
+                for k in range(k1, N):
+                    acc = min(max((tv - vb) / dt, -amax), amax)
+                    pb += vb * dt + 0.5 * acc * dt * dt
+                    vb += acc * dt
+                    P[c, k, ax], V[c, k, ax], A[c, k, ax] = pb, vb, acc
 
 
 @njit(cache=True, nogil=True)
@@ -201,17 +211,35 @@ def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
 
 
 @njit(cache=True, nogil=True)
-def _score(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamma, keep, r_robot, m_s, m_d,
-           w_goal, w_hit, w_static, w_near, worst, w_keep, w_acc, gx, gy, near_goal, r_goal, m_goal, parts):
-    """Cost (C,) of candidates P (C, K, 2); parts (C, 5) gets goal, static, dynamic, keep, effort. Within
-    near_goal of the goal (gx, gy) the static thresholds are r_goal and m_goal (what the goal allows)."""
+def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamma, keep, r_robot, m_s, m_d,
+          w_goal, w_hit, w_static, w_near, worst, w_keep, w_acc, gx, gy, near_goal, r_goal, m_goal, first, parts):
+    """The candidate of P (C, K, 2) with the least cost J (module docstring), the first of equals: returns
+    its index and cost, and writes its terms (goal, static, dynamic, keep, effort) into parts (5,).
+    Within near_goal of the goal (gx, gy) the static thresholds are r_goal and m_goal (what the goal
+    allows). Branch and bound: candidate ``first`` (-1: none) is costed first; every term is >= 0, so
+    a candidate whose terms so far already exceed the least cost found cannot be the least and is left
+    (the same choice, bit for bit, as costing every candidate). owner (H,): the obstacle of each
+    hypothesis, in ascending order."""
     C, K = P.shape[0], P.shape[1]
     nx, ny = clear.shape
     H = O.shape[0]
-    J = np.empty(C)
-    ch = np.empty(H)
-    for c in range(C):
+    start = np.zeros(n_obst + 1, np.int64)  # the hypotheses of obstacle o: start[o]:start[o + 1]
+    for h in range(H):
+        start[owner[h] + 1] = h + 1
+    for o in range(n_obst):
+        start[o + 1] = max(start[o + 1], start[o])
+    best_j, best_c = math.inf, -1
+    for n in range(C + 1):
+        if n == 0:
+            if first < 0:
+                continue
+            c = first
+        else:
+            c = n - 1
+            if c == first:
+                continue
         g_sum = 0.0
+        g_end = 0.0
         st = 0.0
         for k in range(K + 1):
             if k < K:
@@ -236,26 +264,6 @@ def _score(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gam
                 if k == K - 1:
                     g_end = goal[i, j]
         jg = w_goal * 0.5 * (g_end + g_sum / K)
-        for h in range(H):
-            s = 0.0
-            for k in range(K):
-                dx = P[c, k, 0] - O[h, k, 0]
-                dy = P[c, k, 1] - O[h, k, 1]
-                e = math.sqrt(dx * dx + dy * dy) - R[h, k]
-                if e < m_d:
-                    v = w_near * (m_d - e) * (m_d - e)
-                    if e < 0.0:
-                        v += w_hit
-                    s += gamma[h, k] * v
-            ch[h] = s
-        dyn = 0.0
-        for o in range(n_obst):
-            exp, mx = 0.0, 0.0
-            for h in range(H):
-                if owner[h] == o:
-                    exp += prior[h] * ch[h]
-                    mx = max(mx, ch[h])
-            dyn += exp + worst * mx
         kp = 0.0
         nk = min(keep.shape[0], K)
         for k in range(nk):
@@ -267,9 +275,36 @@ def _score(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gam
         for k in range(K):
             ef += A[c, k, 0] * A[c, k, 0] + A[c, k, 1] * A[c, k, 1]
         ef = w_acc * ef / K
-        J[c] = jg + st + dyn + kp + ef
-        parts[c, 0], parts[c, 1], parts[c, 2], parts[c, 3], parts[c, 4] = jg, st, dyn, kp, ef
-    return J
+        if jg + st + 0.0 + kp + ef > best_j:
+            continue
+        dyn = 0.0
+        cut = False
+        for o in range(n_obst):
+            exp, mx = 0.0, 0.0
+            for h in range(start[o], start[o + 1]):
+                s = 0.0
+                for k in range(K):
+                    dx = P[c, k, 0] - O[h, k, 0]
+                    dy = P[c, k, 1] - O[h, k, 1]
+                    e = math.sqrt(dx * dx + dy * dy) - R[h, k]
+                    if e < m_d:
+                        v = w_near * (m_d - e) * (m_d - e)
+                        if e < 0.0:
+                            v += w_hit
+                        s += gamma[h, k] * v
+                exp += prior[h] * s
+                mx = max(mx, s)
+            dyn += exp + worst * mx
+            if jg + st + dyn + kp + ef > best_j:
+                cut = True
+                break
+        if cut:
+            continue
+        J = jg + st + dyn + kp + ef
+        if J < best_j or (J == best_j and c < best_c) or best_c < 0:
+            best_j, best_c = J, c
+            parts[0], parts[1], parts[2], parts[3], parts[4] = jg, st, dyn, kp, ef
+    return best_c, best_j
 
 
 @njit(cache=True, nogil=True)
@@ -360,12 +395,14 @@ class ManeuverSelector:
         self.reset()
 
     def reset(self) -> None:
+        self._buffers: dict = {}  # the candidates' arrays, reused from plan to plan
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None  # (t0, positions (N+1, 2), accelerations)
 
-    def candidates(self, p0, v0, guide_dir, previous_acc=None, approach=None):
+    def candidates(self, p0, v0, guide_dir, previous_acc=None, approach=None, out: dict | None = None):
         """Positions (C, N, 2), velocities, accelerations of every two-phase candidate, plus, when
         approach (2,) is given, flying straight to that point and stopping there (_approach), and, when
-        previous_acc (N, 2) is given, the previous choice's accelerations flown again from now (last)."""
+        previous_acc (N, 2) is given, the previous choice's accelerations flown again from now (last).
+        out: a dict whose arrays are reused from call to call (new arrays when None)."""
         e = np.asarray(guide_dir, float)[:2]
         e = e / max(np.linalg.norm(e), 1e-9)
         n = np.array([-e[1], e[0]])
@@ -375,7 +412,14 @@ class ManeuverSelector:
         acc = previous_acc
         p0, v0 = np.asarray(p0, float), np.asarray(v0, float)
         extra = int(acc is not None) + int(approach is not None)
-        P, V, A = _two_phase(p0, v0, np.ascontiguousarray(T), self.k_switch, self.N, self.dt, self.a_max, extra)
+        shape = (len(T) * len(T) + extra, self.N, 2)
+        if out is None:
+            P, V, A = np.empty(shape), np.empty(shape), np.empty(shape)
+        else:
+            if out.get("shape") != shape:
+                out.update(shape=shape, P=np.empty(shape), V=np.empty(shape), A=np.empty(shape))
+            P, V, A = out["P"], out["V"], out["A"]
+        _two_phase(P, V, A, p0, v0, np.ascontiguousarray(T), self.k_switch, self.dt, self.a_max)
         if approach is not None:
             r = len(P) - extra
             P[r], V[r], A[r] = _approach(p0, v0, np.asarray(approach, float)[:2], self.N, self.dt, self.a_max,
@@ -402,7 +446,7 @@ class ManeuverSelector:
         q = self._least_cost_point(goal_field, origin_xy, resolution, goal_xy)
         if q is not None and np.hypot(*(q - p0)) > cfg.approach_range:
             q = None
-        P, V, A = self.candidates(p0, v0, guide_dir, prev_acc, q)
+        P, V, A = self.candidates(p0, v0, guide_dir, prev_acc, q, out=self._buffers)
         sp = np.linalg.norm(V[:, -1], axis=1)
         stop = P[:, -1] + V[:, -1] * (sp / (2 * cfg.brake))[:, None]
         O, R, G, owner, prior = [], [], [], [], []
@@ -422,17 +466,16 @@ class ManeuverSelector:
             O, R, G = np.zeros((0, N, 2)), np.zeros((0, N)), np.zeros((0, N))
             owner, prior = np.zeros(0, np.int64), np.zeros(0)
         keep = prev_pos[1:cfg.keep_steps + 1] if prev_pos is not None else np.zeros((0, 2))
-        parts = np.empty((len(P), 5))
-        J = _score(np.ascontiguousarray(P), np.ascontiguousarray(A), stop, clear, goal_field,
-                   float(origin_xy[0]), float(origin_xy[1]), float(resolution), np.ascontiguousarray(O), R, owner,
-                   prior, len(obstacles), G, np.ascontiguousarray(keep), self.r, cfg.static_margin,
-                   cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static, cfg.w_near, cfg.worst_case, cfg.w_keep,
-                   cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]), cfg.near_goal, r_goal, m_goal, parts)
+        parts = np.empty(5)
+        b, cost = _best(P, A, stop, clear, goal_field, float(origin_xy[0]), float(origin_xy[1]), float(resolution),
+                        np.ascontiguousarray(O), R, owner, prior, len(obstacles), G, np.ascontiguousarray(keep),
+                        self.r, cfg.static_margin, cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static,
+                        cfg.w_near, cfg.worst_case, cfg.w_keep, cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]),
+                        cfg.near_goal, r_goal, m_goal, len(P) - 1 if prev_acc is not None else -1, parts)
         names = ["goal", "static", "dynamic", "keep", "effort"]
-        b = int(np.argmin(J))
         pos, vel = np.vstack([p0, P[b]]), np.vstack([v0, V[b]])
         self._prev = (float(t0), pos, A[b].copy())
-        return Maneuver(pos, vel, A[b].copy(), float(J[b]), dict(zip(names, parts[b].round(4).tolist())), len(P))
+        return Maneuver(pos, vel, A[b].copy(), float(cost), dict(zip(names, parts.round(4).tolist())), len(P))
 
     @staticmethod
     def _least_cost_point(goal_field: np.ndarray, origin_xy, resolution: float, goal_xy) -> np.ndarray | None:

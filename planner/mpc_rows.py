@@ -7,7 +7,10 @@ c (N, 3) and returns unit normals and right-hand sides (n . p_k >= b).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from planner.mpc_config import MPCConfig
 
@@ -100,9 +103,8 @@ def slide_clear(cfg: MPCConfig, c, PT, d2, req, side):
 
 
 def static_rows(cfg: MPCConfig, c, pts, side, p0):
-    """(5): greedy separating planes, normals (N, Ks, 3) (zeros where unused) and rhs (N, Ks).
-    Written for numpy speed on thousands of points: matrix products against the contiguous (3, M)
-    transpose, masks combined as booleans, never a masked float assignment."""
+    """(5): greedy separating planes, normals (N, Ks, 3) (zeros where unused) and rhs (N, Ks) (_greedy_planes).
+    The distances are matrix products against the contiguous (3, M) transpose."""
     N, Ks = cfg.horizon, cfg.static_per_step
     n_out, b_out = np.zeros((N, Ks, 3)), np.full((N, Ks), -np.inf)
     r, req = cfg.static_radius, cfg.robot_radius + cfg.voxel_size / 2 + cfg.static_margin
@@ -125,31 +127,57 @@ def static_rows(cfg: MPCConfig, c, pts, side, p0):
         c = c.copy()
         c[pen] = slide_clear(cfg, c[pen], PT, d2[pen], req, side)
         d2[pen] = sqdist(c[pen])
-    dead = d2 > r * r
-    rows, key = np.arange(N), np.empty_like(d2)
-    for j in range(Ks):
-        np.multiply(dead, 1e30, out=key)
-        key += d2
-        idx = np.argmin(key, axis=1)
-        use = ~dead[rows, idx]
-        if not use.any():
-            break
-        q = pts[idx]
-        nv = c - q
-        # A linearisation point beyond the voxel, seen from the drone (the previous plan went through a
-        # wall on slack), would give a plane keeping the plan beyond the wall: where the straight
-        # line from the drone to c_k passes within the clearance of q, orient the plane from the
-        # drone's position instead, which is on the free side. (A plan through a gap passes its
-        # edge voxels farther than that and keeps its planes.)
-        seg = c - p0
-        w = np.clip(np.sum((q - p0) * seg, axis=1) / np.maximum(np.sum(seg * seg, axis=1), 1e-12), 0.0, 1.0)
-        crosses = np.linalg.norm(p0 + w[:, None] * seg - q, axis=1) < req
-        behind = crosses & (np.sum(nv * (p0 - q), axis=1) < 0.0)
-        nv[behind] = (p0 - q)[behind]
-        nn = np.linalg.norm(nv, axis=1)
-        nv[nn < 1e-9], nn[nn < 1e-9] = side, 1.0  # c_k on a voxel centre (no clear spot found): left
-        n = nv / nn[:, None]
-        nq = np.sum(n * q, axis=1)
-        n_out[use, j], b_out[use, j] = n[use], nq[use] + req
-        dead |= (n @ PT) <= nq[:, None] + 1e-9  # points behind the plane through q: covered
+    _greedy_planes(np.ascontiguousarray(c, dtype=float), np.ascontiguousarray(pts, dtype=float), d2,
+                   np.asarray(p0, float), np.asarray(side, float), r, req, n_out, b_out)
     return n_out, b_out
+
+
+@njit(cache=True, nogil=True)
+def _greedy_planes(c, pts, d2, p0, side, r, req, n_out, b_out):
+    """static_rows' planes into n_out (N, Ks, 3), b_out (N, Ks): for each c_k, Ks times, the nearest point q
+    not yet covered (within r; d2 (N, M): |c_k - q|^2) gives the plane through q, normal from q toward
+    c_k, moved out by req; the points behind that plane are covered."""
+    N, M = d2.shape
+    Ks = n_out.shape[1]
+    live = np.empty(M, np.int64)  # the points of row k not covered yet, in index order
+    for k in range(N):
+        n_live = 0
+        for m in range(M):
+            if d2[k, m] <= r * r:
+                live[n_live] = m
+                n_live += 1
+        for j in range(Ks):
+            if n_live == 0:
+                break  # every point covered
+            best, bi = math.inf, -1
+            for a in range(n_live):
+                if d2[k, live[a]] < best:
+                    best, bi = d2[k, live[a]], live[a]
+            q0, q1, q2 = pts[bi, 0], pts[bi, 1], pts[bi, 2]
+            n0, n1, n2 = c[k, 0] - q0, c[k, 1] - q1, c[k, 2] - q2
+            # A linearisation point beyond the voxel, seen from the drone (the previous plan went through
+            # a wall on slack), would give a plane keeping the plan beyond the wall: where the straight line
+            # from the drone to c_k passes within the clearance of q, orient the plane from the drone's
+            # position instead, which is on the free side. (A plan through a gap passes its edge voxels
+            # farther than that and keeps its planes.)
+            s0, s1, s2 = c[k, 0] - p0[0], c[k, 1] - p0[1], c[k, 2] - p0[2]
+            w = ((q0 - p0[0]) * s0 + (q1 - p0[1]) * s1 + (q2 - p0[2]) * s2) / max(s0 * s0 + s1 * s1 + s2 * s2, 1e-12)
+            w = min(max(w, 0.0), 1.0)
+            e0, e1, e2 = p0[0] + w * s0 - q0, p0[1] + w * s1 - q1, p0[2] + w * s2 - q2
+            a0, a1, a2 = p0[0] - q0, p0[1] - q1, p0[2] - q2
+            if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) < req and n0 * a0 + n1 * a1 + n2 * a2 < 0.0:
+                n0, n1, n2 = a0, a1, a2
+            nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            if nn < 1e-9:  # c_k on a voxel centre (no clear spot found): left
+                n0, n1, n2, nn = side[0], side[1], side[2], 1.0
+            n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
+            nq = n0 * q0 + n1 * q1 + n2 * q2
+            n_out[k, j, 0], n_out[k, j, 1], n_out[k, j, 2] = n0, n1, n2
+            b_out[k, j] = nq + req
+            kept = 0
+            for a in range(n_live):  # the points behind the plane through q are covered
+                m = live[a]
+                if n0 * pts[m, 0] + n1 * pts[m, 1] + n2 * pts[m, 2] > nq + 1e-9:
+                    live[kept] = m
+                    kept += 1
+            n_live = kept

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.fallback import brake_and_hold
-from planner.global_path import PathFollower, cost_to_go, grid_path
+from planner.global_path import PathFollower, block_discs, cost_to_go, grid_path
 from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
 from planner.mpc import MPC, MPCConfig
 from planner.types import PlannerInput, Trajectory
@@ -112,7 +112,7 @@ class MPCPlanner:
     def reset(self) -> None:
         self.mpc.reset()
         self.selector.reset()
-        self._fields = None  # (map version, goal, geofence) -> static clearance and cost-to-go grids
+        self._fields = None  # (grid, goal and fence key, column grids, static clearance, cost-to-go)
         self.last_maneuver = None
         self.follower: PathFollower | None = None
         self._path_stamp = -math.inf
@@ -131,24 +131,18 @@ class MPCPlanner:
         b = occupancy.column_blocked(z - self.cfg.band_half_height, z + self.cfg.band_half_height, inflate=True)
         if not obstacles:
             return b
-        b = b.copy()
         m = self.cfg.mpc
-        nx, ny = b.shape
         times = np.asarray(self.cfg.block_times)
+        centres, radii = [], []
         for o in obstacles:
             r = 0.5 * float(np.hypot(o.size[0], o.size[1])) + m.robot_radius + m.dynamic_margin
-            for c in o.predict(times):
-                if not np.all(np.isfinite(c)):
-                    continue
-                i0, j0 = occupancy.world_to_cell(c[None, :2] - r)[0]
-                i1, j1 = occupancy.world_to_cell(c[None, :2] + r)[0]
-                i0, j0, i1, j1 = max(i0, 0), max(j0, 0), min(i1, nx - 1), min(j1, ny - 1)
-                if i0 > i1 or j0 > j1:
-                    continue
-                ii, jj = np.mgrid[i0:i1 + 1, j0:j1 + 1]
-                centres = occupancy.cell_to_world(np.stack([ii.ravel(), jj.ravel()], axis=1))
-                inside = np.hypot(centres[:, 0] - c[0], centres[:, 1] - c[1]) <= r
-                b[ii.ravel()[inside], jj.ravel()[inside]] = True
+            c = o.predict(times)
+            ok = np.all(np.isfinite(c), axis=1)
+            centres.append(c[ok, :2])
+            radii.append(np.full(int(ok.sum()), r))
+        b = b.copy()
+        block_discs(b, np.ascontiguousarray(np.concatenate(centres)), np.concatenate(radii),
+                    float(occupancy.xy_origin[0]), float(occupancy.xy_origin[1]), float(occupancy.res))
         return b
 
     def _path_still_free(self, blocked, occupancy, s0: float) -> bool:
@@ -209,17 +203,21 @@ class MPCPlanner:
         return p_ref, v_ref
 
     def _static_fields(self, inp: PlannerInput):
-        """Static clearance and cost-to-go grids at the flight altitude, recomputed when the map changes."""
+        """Static clearance and cost-to-go grids at the flight altitude, recomputed when the column grids
+        they are made from, the goal or the geofence change (most map updates leave the grids as they were)."""
         occ, z = inp.occupancy, float(inp.goal[2])
         fence = None if inp.geofence is None or not self.cfg.use_geofence else tuple(np.asarray(g, float) for g in inp.geofence)
-        key = (id(occ), occ.version, tuple(np.round(inp.goal, 6)), None if fence is None else tuple(np.r_[fence[0], fence[1]]))
-        if self._fields is None or self._fields[0] != key:
-            h = self.cfg.maneuvers.band_half_height
-            clear = static_clearance(occ.column_blocked(z - h, z + h, inflate=False), occ.res, occ.xy_origin, fence)
-            blocked = occ.column_blocked(z - self.cfg.band_half_height, z + self.cfg.band_half_height, inflate=True)
+        h = self.cfg.maneuvers.band_half_height
+        solid = occ.column_blocked(z - h, z + h, inflate=False)
+        blocked = occ.column_blocked(z - self.cfg.band_half_height, z + self.cfg.band_half_height, inflate=True)
+        key = (occ.xy_origin.tobytes(), occ.res, tuple(np.round(inp.goal, 6)),
+               None if fence is None else tuple(np.r_[fence[0], fence[1]]))
+        f = self._fields
+        if f is None or f[0] != key or not (np.array_equal(f[1], solid) and np.array_equal(f[2], blocked)):
+            clear = static_clearance(solid, occ.res, occ.xy_origin, fence)
             goal = cost_to_go(blocked, occ.xy_origin, occ.res, inp.goal[:2])
-            self._fields = (key, clear, goal)
-        return self._fields[1], self._fields[2]
+            self._fields = (key, solid, blocked, clear, goal)
+        return self._fields[3], self._fields[4]
 
     def _toward_path_ahead(self, inp: PlannerInput, distance: float) -> np.ndarray:
         """(2,) from the drone to the point ``distance`` metres further along the path than its projection."""

@@ -90,13 +90,17 @@ class PassiveSafetyShield:
     # ------------------------------------------------------------------ what could be where
 
     def _clearance(self, inp: PlannerInput) -> dict:
-        """Metres to static structure on the map's column grid at the flight altitude (cached on the map)."""
+        """Metres to static structure on the map's column grid at the flight altitude (cached on the column grid)."""
         c, occ = self.cfg, inp.occupancy
-        key = (getattr(occ, "version", None), round(float(inp.goal[2]), 3))
-        if self._fields is not None and self._fields["key"] == key:
-            return self._fields
         z = float(inp.goal[2])
-        solid = occ.column_blocked(z - c.band, z + c.band, inflate=False)
+        raw = occ.column_blocked(z - c.band, z + c.band, inflate=False)
+        fence = None if inp.geofence is None else tuple(np.r_[np.asarray(inp.geofence[0], float).ravel(),
+                                                             np.asarray(inp.geofence[1], float).ravel()])
+        key = (z, fence, occ.xy_origin.tobytes(), occ.cfg.resolution)  # and the grid itself, below
+        f = self._fields
+        if f is not None and f["key"] == key and np.array_equal(f["raw"], raw):
+            return f  # the map changed elsewhere than in this band
+        solid = raw
         if inp.geofence is not None:
             centres = occ.cell_to_world(np.argwhere(np.ones(solid.shape, bool))).reshape(solid.shape + (2,))
             lo, hi = np.asarray(inp.geofence[0], float), np.asarray(inp.geofence[1], float)
@@ -104,8 +108,8 @@ class PassiveSafetyShield:
                              | (centres[..., 1] > hi[1]))
         res = occ.cfg.resolution
         clear = distance_to(solid, res) - 0.5 * res if solid.any() else np.full(solid.shape, 1e3)
-        self._fields = {"key": key, "clear": np.ascontiguousarray(clear), "solid": solid, "origin": occ.xy_origin,
-                        "res": res}
+        self._fields = {"key": key, "raw": raw, "clear": np.ascontiguousarray(clear), "solid": solid,
+                        "origin": occ.xy_origin, "res": res}
         return self._fields
 
     def _people(self, inp: PlannerInput):

@@ -2,6 +2,7 @@
 planner, the closed loop's real-time factor)."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from sim.scenario import RENDERER_CHOICES, load_scenario
@@ -17,7 +18,8 @@ def add_parser(sub) -> None:
                     "real-time figures of the simulator, renderer by renderer. perception: every DODT "
                     "configuration on the same simulated frames, scored against ground truth, laid out like the "
                     "paper's Table I (written to --out). runtime: per-module milliseconds per frame of one "
-                    "configuration, like Table II. planner: voxel map update and MPC solve times. loop: the "
+                    "configuration, like Table II. planner: voxel map update and MPC solve times, and the whole "
+                    "planner's time per plan replaying the inputs of closed-loop episodes. loop: the "
                     "real-time factor of a closed-loop episode (the median of three runs). Figures are wall-clock "
                     "times on this machine.",
         epilog=LazyText(lambda: examples(
@@ -28,11 +30,12 @@ def add_parser(sub) -> None:
         func=cmd_bench)
     b.add_argument("what", choices=("sim", "perception", "runtime", "planner", "loop"),
                    help="sim: render/physics/real-time; perception: Table I; runtime: Table II; planner: voxel map "
-                        "update and MPC solve times; loop: real-time factor of a closed-loop episode")
-    b.add_argument("--scenario", default=None, help="sim, runtime: the scenario (default corridor)")
+                        "update, MPC and whole-planner times; loop: real-time factor of a closed-loop episode")
+    b.add_argument("--scenario", default=None, help="sim, runtime, planner: the scenario (default corridor)")
     b.add_argument("--seconds", type=seconds, default=10.0, help="simulated seconds (sim: real-time figure; runtime: frames)")
     b.add_argument("--out", default="runs/bench_perception", help="perception: output folder")
-    b.add_argument("--seeds", type=whole(1, 10_000), default=1, help="perception: seeds 0..N-1 per scenario")
+    b.add_argument("--seeds", type=whole(1, 10_000), default=None, help="perception: seeds 0..N-1 per scenario; planner: episodes "
+                                                                        "replayed (seeds 0..N-1, default 2)")
     b.add_argument("--scenarios", default=None, help="perception: comma-separated scenarios")
     b.add_argument("--configs", default=None, help="perception: comma-separated configurations")
     b.add_argument("--duration", type=seconds, default=None, help="perception: seconds per scenario")
@@ -40,7 +43,7 @@ def add_parser(sub) -> None:
     b.add_argument("--rates", default=None, metavar="HZ,...",
                    help="perception: also score each configuration on the frames decimated to these rates "
                         "(e.g. 30,15,10,5), rows named config@RATEHz")
-    b.add_argument("--config", default="dodt", help="runtime: the configuration; loop: the perception mode")
+    b.add_argument("--config", default="dodt", help="runtime: the configuration; loop, planner: the perception mode")
     b.add_argument("--frames", type=whole(1, 100_000), default=30, help="frames for the render medians")
     b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     b.add_argument("--renderer", choices=RENDERER_CHOICES, default=None, help="loop: " + RENDERER_HELP)
@@ -81,15 +84,20 @@ def cmd_bench(args) -> int:
         output_folder(args.out)
         duration = args.duration if args.duration else (6.0 if args.quick else None)
         rates = parse_rates(args.rates) if args.rates else None
-        bench_perception.run(Path(args.out), list(range(args.seeds)), scenarios, configs, duration, rates=rates)
+        bench_perception.run(Path(args.out), list(range(args.seeds or 1)), scenarios, configs, duration, rates=rates)
         return 0
     if args.what == "planner":
         from planner.mpc import bench_mpc
         from planner.voxel_map import bench_update
 
+        from experiments import bench_planner
+
         bench_update()
         for seed in range(3):
             bench_mpc(seed=seed)
+        out = bench_planner.run(args.scenario or "corridor", range(args.seeds or 2), perception=args.config)
+        if args.json:
+            args.json.write_text(json.dumps(out, indent=1) + "\n")
         return 0
     if args.what == "loop":
         from experiments.episode import EpisodeConfig, run_episode

@@ -210,3 +210,72 @@ def test_view_cost_is_nil_when_one_heading_sees_the_motion_and_the_walker_and_gr
     far = [[[10.0, 5.0], [10.0, 5.0]]]  # beyond the watch range: only the motion counts
     cost_f, arg_f = _view(fwd, far)
     assert cost_f[0] == pytest.approx(0.0) and HEADINGS[arg_f[0]] == 0.0
+
+
+# --- the cost and its branch and bound -----------------------------------------------------------------
+
+def _costs_by_definition(P, A, stop, clear, goal, O, R, owner, prior, gamma, keep, cfg, r, goal_xy, r_goal, m_goal):
+    """Every candidate's cost terms (C, 5), from the module docstring's formula, candidate by candidate."""
+    out = []
+    for c in range(len(P)):
+        pts = np.vstack([P[c], stop[c][None]])
+        ij = np.clip(np.floor((pts - ORIGIN) / RES).astype(int), 0, np.array(clear.shape) - 1)
+        d = clear[ij[:, 0], ij[:, 1]]
+        near = np.sum((pts - goal_xy) ** 2, axis=1) < cfg.near_goal ** 2
+        rr, mm = np.where(near, r_goal, r), np.where(near, m_goal, cfg.static_margin)
+        st = cfg.w_hit * np.sum(d < rr) + cfg.w_static * np.sum(np.maximum(rr + mm - d, 0.0)[:-1] ** 2)
+        g = goal[ij[:-1, 0], ij[:-1, 1]]
+        jg = cfg.w_goal * 0.5 * (g[-1] + g.mean())
+        e = np.linalg.norm(P[c][None] - O, axis=2) - R  # (H, K)
+        ch = np.sum(gamma * np.where(e < cfg.dynamic_margin, cfg.w_near * (cfg.dynamic_margin - e) ** 2
+                                     + cfg.w_hit * (e < 0), 0.0), axis=1)
+        dyn = sum(np.sum(prior[owner == o] * ch[owner == o]) + cfg.worst_case * ch[owner == o].max()
+                  for o in np.unique(owner))
+        kp = cfg.w_keep * np.mean(np.sum((P[c, :len(keep)] - keep) ** 2, axis=1)) if len(keep) else 0.0
+        ef = cfg.w_acc * np.mean(np.sum(A[c] ** 2, axis=1))
+        out.append([jg, st, dyn, kp, ef])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_branch_and_bound_picks_the_least_cost_candidate(seed):
+    from planner.maneuvers import _best
+    rng = np.random.default_rng(seed)
+    cfg, C, K = ManeuverConfig(), 300, 25
+    P = np.cumsum(rng.normal(0.0, 0.15, (C, K, 2)), axis=1) + np.array([3.0, 0.0])
+    A = rng.normal(0.0, 1.0, (C, K, 2))
+    stop = P[:, -1] + rng.normal(0.0, 0.2, (C, 2))
+    occ = rng.random((170, 50)) < 0.02
+    clear, goal = static_clearance(occ, RES, ORIGIN, geofence=FENCE), cost_to_go(occ, ORIGIN, RES, GOAL)
+    n_obst = 3
+    owner = np.repeat(np.arange(n_obst), 9).astype(np.int64)
+    O = np.array([3.0, 0.0]) + np.cumsum(rng.normal(0.0, 0.1, (len(owner), K, 2)), axis=1)
+    R = np.full((len(owner), K), 0.7)
+    prior = rng.random(len(owner))
+    gamma = rng.random((len(owner), K))
+    keep = P[7, :10] + rng.normal(0.0, 0.05, (10, 2))
+    goal_xy = np.array([4.0, 0.5])  # near the candidates: the goal's own static thresholds are used
+    ref = _costs_by_definition(P, A, stop, clear, goal, O, R, owner, prior, gamma, keep, cfg, R_ROBOT, goal_xy,
+                               0.3, 0.05)
+    J = ref.sum(axis=1)
+    for first in (-1, 7, int(np.argmax(J))):
+        parts = np.empty(5)
+        b, cost = _best(P, A, stop, clear, goal, ORIGIN[0], ORIGIN[1], RES, O, R, owner, prior, n_obst, gamma, keep,
+                        R_ROBOT, cfg.static_margin, cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static,
+                        cfg.w_near, cfg.worst_case, cfg.w_keep, cfg.w_acc, goal_xy[0], goal_xy[1], cfg.near_goal,
+                        0.3, 0.05, first, parts)
+        assert b == int(np.argmin(J))
+        assert cost == pytest.approx(J.min(), rel=1e-12)
+        np.testing.assert_allclose(parts, ref[b], rtol=1e-12, atol=1e-12)
+
+
+def test_candidates_reuse_their_buffers_without_changing_them():
+    sel = ManeuverSelector()
+    args = (np.array([2.0, 0.3]), np.array([1.8, -0.7]), np.array([1.0, 0.2]))
+    fresh = [x.copy() for x in sel.candidates(*args)]
+    out = {}
+    sel.candidates(np.array([0.0, 0.0]), np.array([-1.0, 0.5]), np.array([0.0, 1.0]), out=out)
+    again = sel.candidates(*args, out=out)
+    assert again[0] is out["P"]
+    for x, y in zip(fresh, again):
+        assert np.array_equal(x, y)

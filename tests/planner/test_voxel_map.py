@@ -331,3 +331,14 @@ def test_known_geometry_replaces_the_map_and_is_never_cleared():
     assert m.established_fraction(np.array([0.65, 0.65, 0.3]), np.array([0.3, 0.3, 0.6])) == 1.0
     with pytest.raises(ValueError, match="set_known"):
         m.set_known(np.zeros((3, 3, 3), bool))
+
+
+def test_column_blocked_follows_the_map_and_is_shared_read_only():
+    m, ijk = _single()
+    z = m.origin[2] + (ijk[2] + 0.5) * m.res
+    first = m.column_blocked(z - 0.3, z + 0.3)
+    assert m.column_blocked(z - 0.3, z + 0.3) is first  # the same map: computed once
+    with pytest.raises(ValueError):
+        first[0, 0] = True  # shared by every caller: not to be edited
+    m.set_known(np.zeros(m.log_odds.shape, bool))  # the map changes: so does the answer
+    assert not m.column_blocked(z - 0.3, z + 0.3).any() and first.any()

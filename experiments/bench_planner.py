@@ -1,0 +1,113 @@
+"""The planner's time per plan on the inputs of closed-loop episodes (``dodt-nav bench planner``).
+
+An episode is flown once with a recorder around the default planner: every PlannerInput is kept, its
+voxel map reduced to the occupied set (all the planner reads of it) and its seen-space copied. The
+inputs are then replayed, in order, through a fresh default planner, ``repeats`` times, timing each
+``plan`` call alone: the figure is the planner's, not the loop's, and its inputs are those of a real
+flight. The replayed plans must equal the recorded ones (the planner is deterministic); the count of
+those that do is printed beside the times.
+"""
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from planner.types import PlannerInput, Trajectory
+from planner.voxel_map import VoxelMap
+from sim.vehicle import load_vehicle
+
+
+@dataclass(frozen=True)
+class _Snapshot:
+    inp: PlannerInput  # occupancy None; the map is rebuilt from the fields below
+    occupied: np.ndarray | None  # packbits of log_odds >= l_occ
+    map_cfg: object
+    plan: Trajectory
+
+
+class _Recorder:
+    """A planner that records what it is asked and what the wrapped planner answers."""
+
+    def __init__(self, planner):
+        self.planner, self.snapshots = planner, []
+
+    def reset(self) -> None:
+        self.planner.reset()
+
+    def plan(self, inp: PlannerInput) -> Trajectory:
+        out = self.planner.plan(inp)
+        occ = inp.occupancy
+        packed = None if occ is None else np.packbits(occ.log_odds >= occ.l_occ)
+        self.snapshots.append(_Snapshot(replace(inp, occupancy=None, seen=copy.deepcopy(inp.seen)), packed,
+                                        None if occ is None else occ.cfg, out))
+        return out
+
+    @property
+    def path(self):
+        return getattr(self.planner, "path", None)
+
+
+def _rebuild(s: _Snapshot) -> PlannerInput:
+    if s.occupied is None:
+        return s.inp
+    m = VoxelMap(s.map_cfg)
+    occ = np.unpackbits(s.occupied, count=m.log_odds.size).reshape(m.log_odds.shape).astype(bool)
+    m.log_odds[...] = np.where(occ, np.float32(m.l_max), np.float32(m.l_min))
+    m.version += 1
+    return replace(s.inp, occupancy=m)
+
+
+def _same(a: Trajectory, b: Trajectory) -> bool:
+    return (a.status == b.status and a.yaw == b.yaw and np.array_equal(a.positions, b.positions)
+            and np.array_equal(a.velocities, b.velocities) and np.array_equal(a.accelerations, b.accelerations))
+
+
+def record(scenario: str, seed: int, perception: str = "dodt", **episode) -> list[_Snapshot]:
+    """The planner inputs and plans of one closed-loop episode with the default planner (``episode``:
+    experiments.episode.EpisodeConfig fields)."""
+    from experiments.episode import EpisodeConfig, default_planner, run_episode
+
+    rec = _Recorder(default_planner(load_vehicle().radius))
+    run_episode(scenario, seed=seed, perception=perception, planner=rec, cfg=EpisodeConfig(**episode))
+    return rec.snapshots
+
+
+def replay(snapshots: list[_Snapshot], robot_radius: float, repeats: int = 3) -> dict:
+    """Times (ms) of every plan call over ``repeats`` replays, and how many replayed plans equal the loop's."""
+    from experiments.episode import default_planner
+
+    inputs = [_rebuild(s) for s in snapshots]
+    times, same = [], 0
+    for r in range(repeats):
+        planner = default_planner(robot_radius)
+        planner.reset()
+        run = []
+        for s, inp in zip(snapshots, inputs):
+            t = time.perf_counter()
+            out = planner.plan(inp)
+            run.append((time.perf_counter() - t) * 1e3)
+            if r == 0:
+                same += _same(out, s.plan)
+        times.append(run)
+    return {"ms": np.array(times), "same": same, "n": len(snapshots)}
+
+
+def run(scenario: str = "corridor", seeds=(0, 1), perception: str = "dodt", repeats: int = 3) -> dict:
+    """Records and replays ``seeds`` of ``scenario``; prints and returns the figures."""
+    radius = load_vehicle().radius
+    per_rep, same, n = [], 0, 0
+    for seed in seeds:
+        r = replay(record(scenario, seed, perception), radius, repeats)
+        per_rep.append(r["ms"])
+        same, n = same + r["same"], n + r["n"]
+    ms = np.concatenate(per_rep, axis=1)  # (repeats, plans)
+    stats = {q: float(np.median([np.percentile(row, p) for row in ms])) for q, p in
+             (("median_ms", 50), ("p95_ms", 95), ("p99_ms", 99))}
+    out = dict(stats, plans=n, repeats=repeats, same_as_loop=same, max_ms=float(ms.max()))
+    print(f"planner replay, {scenario} seeds {','.join(map(str, seeds))}, perception {perception}: {n} plans x "
+          f"{repeats} replays; per plan median {stats['median_ms']:.2f} ms, p95 {stats['p95_ms']:.2f} ms, "
+          f"p99 {stats['p99_ms']:.2f} ms (medians over the replays); replayed plans equal to the loop's: {same}/{n}")
+    return out

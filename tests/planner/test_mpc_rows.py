@@ -1,0 +1,56 @@
+"""The MPC's static half-space rows (planner.mpc_rows.static_rows) against their definition."""
+import numpy as np
+import pytest
+
+from planner.mpc_config import MPCConfig
+from planner.mpc_rows import static_rows
+
+
+def _planes_by_definition(cfg, c, pts, side, p0):
+    """For each c_k, static_per_step times: the nearest point within static_radius not yet behind a plane
+    gives a plane through it facing c_k (from the drone's side when the segment drone -> c_k passes
+    within the clearance of it and c_k lies beyond it), moved out by the clearance."""
+    req = cfg.robot_radius + cfg.voxel_size / 2 + cfg.static_margin
+    N, Ks = cfg.horizon, cfg.static_per_step
+    n_out, b_out = np.zeros((N, Ks, 3)), np.full((N, Ks), -np.inf)
+    for k in range(N):
+        alive = np.linalg.norm(pts - c[k], axis=1) <= cfg.static_radius
+        for j in range(Ks):
+            if not alive.any():
+                break
+            d = np.where(alive, np.linalg.norm(pts - c[k], axis=1), np.inf)
+            q = pts[int(np.argmin(d))]
+            nv = c[k] - q
+            seg = c[k] - p0
+            w = np.clip(np.dot(q - p0, seg) / max(np.dot(seg, seg), 1e-12), 0.0, 1.0)
+            if np.linalg.norm(p0 + w * seg - q) < req and np.dot(nv, p0 - q) < 0:
+                nv = p0 - q
+            n = nv / np.linalg.norm(nv) if np.linalg.norm(nv) >= 1e-9 else side
+            n_out[k, j], b_out[k, j] = n, n @ q + req
+            alive &= pts @ n > n @ q + 1e-9
+    return n_out, b_out
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_static_rows_are_the_greedy_separating_planes(seed):
+    rng = np.random.default_rng(seed)
+    cfg = MPCConfig()
+    walls = np.array([(x, y, z) for x in np.arange(0.05, 8, 0.1) for y in (-1.95, 1.95)
+                      for z in np.arange(0.45, 2.0, 0.1)])
+    clutter = rng.uniform([0, -2, 0.4], [8, 2, 2], (int(rng.integers(1, 400)), 3)).round(1) + 0.05
+    pts = np.vstack([walls, clutter[np.abs(clutter[:, 1]) > 0.9]])
+    c = np.column_stack([np.linspace(rng.uniform(0, 4), rng.uniform(3, 8), cfg.horizon),
+                         rng.uniform(-0.2, 0.2, cfg.horizon), rng.uniform(1.1, 1.3, cfg.horizon)])  # no ties
+    c = c[np.argsort(c[:, 0])]
+    p0 = c[0] - [0.3, 0.0, 0.0]
+    # linearisation points already clear of every point: static_rows leaves them where they are
+    keep = np.min(np.linalg.norm(pts[None] - c[:, None], axis=2), axis=1) >= 0.56
+    c, side = c[keep], np.array([0.0, 1.0, 0.0])
+    if len(c) == 0:
+        pytest.skip("no clear linearisation point drawn")
+    cfg = MPCConfig(horizon=len(c))
+    n, b = static_rows(cfg, c, pts, side, p0)
+    n_ref, b_ref = _planes_by_definition(cfg, c, pts, side, p0)
+    np.testing.assert_allclose(n, n_ref, atol=1e-12)
+    np.testing.assert_allclose(b, b_ref, atol=1e-12)
+    assert np.isfinite(b).sum() > 0
