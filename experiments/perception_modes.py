@@ -1,15 +1,10 @@
-"""Perception modes the closed loop can fly with, behind one small interface.
+"""The perception modes the closed loop can fly with, each a perception module (dodt.protocol).
 
-A perception module receives each sensor frame (and, only if it declares
-``uses_ground_truth``, the simulator's truth for that frame) and returns a
-``PerceptionOutput``: the moving obstacles for the planner and the boxes the static map must
-clear. To plug in another detector, implement ``reset`` and ``update`` and pass an instance to
-``experiments.episode.run_episode(perception=...)``, or name its class as ``module:Class`` to any
-command's ``--perception`` (experiments.plugins; built with no arguments; examples/custom_perception.py). A module that declares ``uses_images = False``
-reads no depth or colour; with a known static map (``EpisodeConfig.static_map = "truth"``) the
-simulator then renders nothing (a module without the attribute is taken to need images). One that
-declares ``uses_color = False`` reads no colour: its frames carry none, and the simulator's gl
-renderer draws depth only (a module without the attribute is taken to need colour).
+A perception module receives each sensor frame (and, only if it declares ``uses_ground_truth``, the
+simulator's truth for that frame) and returns a ``PerceptionOutput``: the moving obstacles for the
+planner and the boxes the static map must clear. The protocol and its output type live beside DODT's
+output types in ``dodt/protocol.py`` (re-exported here); your own module plugs in as ``module:Class``
+(experiments.plugins; examples/custom_perception.py).
 
 Modes:
 - ``dodt`` (and any DODT preset name, e.g. ``dodt-no-coast``): our DODT library on the frames.
@@ -30,8 +25,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
-from typing import Protocol
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,6 +34,7 @@ from dodt.frames import SensorFrame
 from dodt.geometry import wrap_angle
 from dodt.pipeline import DODT
 from dodt.presets import PRESETS, preset
+from dodt.protocol import PerceptionModule, PerceptionOutput  # also importable from here, as before
 from planner.types import ObstaclePrediction
 
 MODES = ("dodt", "oracle", "oracle-360", "oracle-noisy", "static-only")
@@ -65,27 +60,6 @@ def bearing_and_distance(cam: np.ndarray, heading: float, xy) -> tuple[float, fl
     horizontal distance to it."""
     d = np.asarray(xy, dtype=float)[:2] - cam[:2]
     return abs(wrap_angle(math.atan2(d[1], d[0]) - heading)), float(np.hypot(*d))
-
-
-@dataclass(frozen=True, eq=False)
-class PerceptionOutput:
-    stamp: float
-    obstacles: tuple[ObstaclePrediction, ...]  # moving obstacles, state at ``stamp``
-    clear_boxes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()  # (center, size) the map must free
-    tracks: list[dict] = field(default_factory=list)  # everything reported, for the episode log
-    timings_ms: dict[str, float] = field(default_factory=dict)
-    skipped: str | None = None
-
-
-class PerceptionModule(Protocol):
-    name: str
-    uses_ground_truth: bool
-    uses_images: bool  # False: update() reads no depth or colour (with a known static map nothing is rendered)
-    uses_color: bool  # False: update() reads no colour (frames come without one)
-
-    def reset(self) -> None: ...
-
-    def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput: ...
 
 
 BOTTOM_EDGE_TOLERANCE = 0.15  # m: a box bottom this close above the lowest height in view is cut by the image

@@ -172,3 +172,13 @@ def test_noisy_oracle_velocity_error_has_its_size_and_repeats():
     np.testing.assert_array_equal(run(), e)
     exact = make_perception("oracle").update(FRAME, _truth(0.0, [AHEAD])).obstacles[0]
     np.testing.assert_array_equal(exact.velocity, [0.5, 0.0, 0.0])
+
+
+def test_the_protocol_is_dodts_and_every_built_in_mode_implements_it():
+    import dodt.protocol
+    import experiments.perception_modes as pm
+
+    assert pm.PerceptionModule is dodt.protocol.PerceptionModule
+    assert pm.PerceptionOutput is dodt.protocol.PerceptionOutput
+    for mode in pm.MODES:
+        assert isinstance(make_perception(mode), dodt.protocol.PerceptionModule), mode
