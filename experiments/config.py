@@ -9,7 +9,11 @@ Sections and the configuration each one overrides:
 - ``map``: planner.voxel_map.MapConfig of the episode's static map, after the episode sizes it to the
   scenario (``map.p_hit``);
 - ``dodt``: dodt.config.DODTConfig of the DODT perception modes, on top of the mode's preset
-  (``dodt.kalman.q_pos``; dodt.config.override).
+  (``dodt.kalman.q_pos``; dodt.config.override);
+- ``moving_rule``: experiments.perception_modes.MovingTrackRule of the DODT perception modes, which tracks
+  besides DODT's dynamic ones the planner avoids (``moving_rule.min_speed``);
+- ``oracle``: experiments.perception_modes.OracleConfig of the oracle perception modes, on top of the mode's
+  own (``oracle.max_range``; oracle-noisy starts from its velocity noise).
 
 A file holds TOML tables of these sections (``[navigator.mpc]`` then ``horizon = 30``); ``--set`` takes
 ``section.field=value`` with the value a TOML literal (``2.5``, ``true``, ``[3, 5]``, ``"depth"``; a bare
@@ -20,7 +24,8 @@ values of every overridden section; with no overrides nothing is added and resul
 to a run without these options.
 
 The shield and navigator sections configure the default planner only; a plug-in planner
-(experiments.plugins) is built with no arguments. The dodt section configures the DODT modes only.
+(experiments.plugins) is built with no arguments. The dodt and moving_rule sections configure the DODT
+modes only, the oracle section the oracle modes only; a plug-in perception module reads none.
 """
 from __future__ import annotations
 
@@ -31,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-SECTIONS = ("episode", "shield", "navigator", "map", "dodt")
+SECTIONS = ("episode", "shield", "navigator", "map", "dodt", "moving_rule", "oracle")
 
 
 class ConfigError(ValueError):
@@ -41,12 +46,13 @@ class ConfigError(ValueError):
 def _section_classes() -> dict[str, type]:
     from dodt.config import DODTConfig
     from experiments.episode import EpisodeConfig
+    from experiments.perception_modes import MovingTrackRule, OracleConfig
     from planner.navigator import NavigatorConfig
     from planner.shield import ShieldConfig
     from planner.voxel_map import MapConfig
 
     return {"episode": EpisodeConfig, "shield": ShieldConfig, "navigator": NavigatorConfig, "map": MapConfig,
-            "dodt": DODTConfig}
+            "dodt": DODTConfig, "moving_rule": MovingTrackRule, "oracle": OracleConfig}
 
 
 @dataclass(frozen=True)
@@ -59,6 +65,8 @@ class Settings:
     navigator: tuple[tuple[str, Any], ...] = ()
     map: tuple[tuple[str, Any], ...] = ()
     dodt: tuple[tuple[str, Any], ...] = ()
+    moving_rule: tuple[tuple[str, Any], ...] = ()
+    oracle: tuple[tuple[str, Any], ...] = ()
 
     def __bool__(self) -> bool:
         return any(getattr(self, s) for s in SECTIONS)
@@ -68,17 +76,28 @@ class Settings:
         return {f"{s}.{k}": _jsonable(v) for s in SECTIONS for k, v in getattr(self, s)}
 
     # ------------------------------------------------------------ applying
+    def apply(self, section: str, cfg):
+        """``cfg`` (the section's dataclass) with the section's overrides applied; ``cfg`` itself without any."""
+        items = getattr(self, section)
+        return _apply(cfg, items, section) if items else cfg
+
     def episode_config(self, cfg):
-        return _apply(cfg, self.episode, "episode") if self.episode else cfg
+        return self.apply("episode", cfg)
 
     def shield_config(self, cfg):
-        return _apply(cfg, self.shield, "shield") if self.shield else cfg
+        return self.apply("shield", cfg)
 
     def navigator_config(self, cfg):
-        return _apply(cfg, self.navigator, "navigator") if self.navigator else cfg
+        return self.apply("navigator", cfg)
 
     def map_config(self, cfg):
-        return _apply(cfg, self.map, "map") if self.map else cfg
+        return self.apply("map", cfg)
+
+    def moving_rule_config(self, cfg):
+        return self.apply("moving_rule", cfg)
+
+    def oracle_config(self, cfg):
+        return self.apply("oracle", cfg)
 
     def dodt_assignments(self) -> tuple[str, ...]:
         """The dodt section as dodt.config.override's ``section.field=value`` strings."""
@@ -171,34 +190,51 @@ def _coerce(value, hint, key: str):
 
 
 def _apply(cfg, items, section: str):
-    """``cfg`` (a dataclass) with (dotted path, value) items applied through nested dataclasses."""
+    """``cfg`` (a dataclass) with (dotted path, value) items applied through nested dataclasses. Each
+    dataclass is replaced once, with all of its changes, so that values it checks against each other (a
+    minimum and a maximum) can be set in any order."""
+    tree: dict = {}  # field name -> (full key, value), or a dict of the same for a nested dataclass
     for path, value in items:
-        cfg = _set(cfg, path.split("."), value, f"{section}.{path}")
-    return cfg
+        key = f"{section}.{path}"
+        *heads, last = path.split(".")
+        node = tree
+        for h in heads:
+            node = node.setdefault(h, {})
+            if not isinstance(node, dict):
+                raise ConfigError(f"{key}: {node[0]} is set too; a key is a value or a section, not both")
+        if isinstance(node.get(last), dict):
+            raise ConfigError(f"{key}: {_keys(node[last])[0]} is set too; a key is a value or a section, not both")
+        node[last] = (key, value)
+    return _replace(cfg, tree)
 
 
-def _set(obj, parts: list[str], value, key: str):
-    if not dataclasses.is_dataclass(obj):
-        raise ConfigError(f"{key}: no such key")
+def _keys(tree: dict) -> list[str]:
+    """The full keys of every value set in a tree of _apply, in order."""
+    return [k for sub in tree.values() for k in (_keys(sub) if isinstance(sub, dict) else [sub[0]])]
+
+
+def _replace(obj, tree: dict):
     fields = {f.name for f in dataclasses.fields(obj)}
-    name = parts[0]
-    if name not in fields:
-        raise ConfigError(f"{key}: unknown key; {type(obj).__name__} has no field {name!r} "
-                          f"(fields: {', '.join(sorted(fields))})")
-    current = getattr(obj, name)
-    if len(parts) > 1:
-        if not dataclasses.is_dataclass(current):
-            raise ConfigError(f"{key}: unknown key; {type(obj).__name__}.{name} is a value, not a section")
-        new = _set(current, parts[1:], value, key)
-    else:
-        if dataclasses.is_dataclass(current):
-            sub = ", ".join(f.name for f in dataclasses.fields(current))
-            raise ConfigError(f"{key}: is a section; set its fields ({sub})")
-        new = _coerce(value, typing.get_type_hints(type(obj))[name], key)
+    changes = {}
+    for name, sub in tree.items():
+        key = _keys(sub)[0] if isinstance(sub, dict) else sub[0]
+        if name not in fields:
+            raise ConfigError(f"{key}: unknown key; {type(obj).__name__} has no field {name!r} "
+                              f"(fields: {', '.join(sorted(fields))})")
+        current = getattr(obj, name)
+        if isinstance(sub, dict):
+            if not dataclasses.is_dataclass(current):
+                raise ConfigError(f"{key}: unknown key; {type(obj).__name__}.{name} is a value, not a section")
+            changes[name] = _replace(current, sub)
+        else:
+            if dataclasses.is_dataclass(current):
+                fields_of = ", ".join(f.name for f in dataclasses.fields(current))
+                raise ConfigError(f"{key}: is a section; set its fields ({fields_of})")
+            changes[name] = _coerce(sub[1], typing.get_type_hints(type(obj))[name], key)
     try:
-        return dataclasses.replace(obj, **{name: new})
+        return dataclasses.replace(obj, **changes)
     except (ValueError, TypeError) as e:
-        raise ConfigError(f"{key}: {e}") from None
+        raise ConfigError(f"{', '.join(_keys(tree))}: {e}") from None
 
 
 # ---------------------------------------------------------------- reading
@@ -279,6 +315,8 @@ def check(settings: Settings) -> None:
     settings.navigator_config(classes["navigator"]())
     settings.map_config(classes["map"]())
     settings.dodt_config(preset("dodt"))
+    settings.moving_rule_config(classes["moving_rule"]())
+    settings.oracle_config(classes["oracle"]())
     if settings.episode:
         from experiments.episode import STATIC_MAPS
 

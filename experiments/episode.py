@@ -19,12 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dodt.config import DODTConfig
 from dodt.geometry import wrap_angle
 from experiments.environment import environment
 from experiments.episode_log import EpisodeLog, r4
 from experiments.config import Settings
-from experiments.perception_modes import PerceptionModule, make_perception
+from experiments.perception_modes import PerceptionModule, config_sections, make_perception
 from experiments.plugins import DEFAULT_PLANNER, is_spec, make_planner
 from planner.fallback import brake_and_hold
 from planner.mpc import MPCConfig
@@ -129,8 +128,7 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
     sc = sc.for_seed(seed)  # a scenario with ranges: this seed's draw
     settings = settings or Settings()
     cfg = settings.episode_config(cfg)
-    perc = (make_perception(perception, dodt_set=settings.dodt_assignments()) if isinstance(perception, str)
-            else perception)
+    perc = make_perception(perception, settings=settings) if isinstance(perception, str) else perception
     perception_label = perception if isinstance(perception, str) and is_spec(perception) else None
     planner_label = planner if isinstance(planner, str) and planner != DEFAULT_PLANNER else None
     planner = make_planner(planner) if isinstance(planner, str) else planner
@@ -157,9 +155,7 @@ def run_episode(scenario, seed: int | None = None, perception: str | PerceptionM
         if planner is None:
             planner = default_planner(world.vehicle.radius, settings)
             used.update(shield=planner.cfg, navigator=planner.planner.cfg)
-        dodt = getattr(perc, "dodt", None)
-        if isinstance(getattr(dodt, "cfg", None), DODTConfig):
-            used["dodt"] = dodt.cfg
+        used.update(config_sections(perc))
         labels = {"perception": perception_label or getattr(perc, "name", type(perc).__name__),
                   "planner": planner_label or type(planner).__name__}
         summary = _loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame, settings, used, labels)

@@ -1,15 +1,10 @@
-"""Perception modes the closed loop can fly with, behind one small interface.
+"""The perception modes the closed loop can fly with, each a perception module (dodt.protocol).
 
-A perception module receives each sensor frame (and, only if it declares
-``uses_ground_truth``, the simulator's truth for that frame) and returns a
-``PerceptionOutput``: the moving obstacles for the planner and the boxes the static map must
-clear. To plug in another detector, implement ``reset`` and ``update`` and pass an instance to
-``experiments.episode.run_episode(perception=...)``, or name its class as ``module:Class`` to any
-command's ``--perception`` (experiments.plugins; built with no arguments; examples/custom_perception.py). A module that declares ``uses_images = False``
-reads no depth or colour; with a known static map (``EpisodeConfig.static_map = "truth"``) the
-simulator then renders nothing (a module without the attribute is taken to need images). One that
-declares ``uses_color = False`` reads no colour: its frames carry none, and the simulator's gl
-renderer draws depth only (a module without the attribute is taken to need colour).
+A perception module receives each sensor frame (and, only if it declares ``uses_ground_truth``, the
+simulator's truth for that frame) and returns a ``PerceptionOutput``: the moving obstacles for the
+planner and the boxes the static map must clear. The protocol and its output type live beside DODT's
+output types in ``dodt/protocol.py`` (re-exported here); your own module plugs in as ``module:Class``
+(experiments.plugins; examples/custom_perception.py).
 
 Modes:
 - ``dodt`` (and any DODT preset name, e.g. ``dodt-no-coast``): our DODT library on the frames.
@@ -30,22 +25,21 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
-from typing import Protocol
+from dataclasses import dataclass
 
 import numpy as np
 
-from dodt.config import DODTConfig, override
+from dodt.config import DODTConfig
 from dodt.frames import SensorFrame
 from dodt.geometry import wrap_angle
 from dodt.pipeline import DODT
 from dodt.presets import PRESETS, preset
+from dodt.protocol import PerceptionModule, PerceptionOutput  # also importable from here, as before
 from planner.types import ObstaclePrediction
 
 MODES = ("dodt", "oracle", "oracle-360", "oracle-noisy", "static-only")
-# m/s per axis (correlation time 0.5 s): the oracle-noisy mode's velocity error. Its size is 0.35 m/s
-# median, 0.64 m/s 90th percentile; DODT's on walkers within 3 m of the drone in failed corridor episodes:
-# 0.16 / 0.52 m/s while measured, 0.21 / 0.74 m/s with coasting tracks (a larger median, a like tail)
+# m/s per axis (correlation time 0.5 s): the oracle-noisy mode's velocity error, the size of a tracker's
+# velocity error on walkers near the drone (a larger median than DODT's, a like tail)
 NOISY_ORACLE_VELOCITY_NOISE = 0.3
 
 
@@ -67,41 +61,20 @@ def bearing_and_distance(cam: np.ndarray, heading: float, xy) -> tuple[float, fl
     return abs(wrap_angle(math.atan2(d[1], d[0]) - heading)), float(np.hypot(*d))
 
 
-@dataclass(frozen=True, eq=False)
-class PerceptionOutput:
-    stamp: float
-    obstacles: tuple[ObstaclePrediction, ...]  # moving obstacles, state at ``stamp``
-    clear_boxes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()  # (center, size) the map must free
-    tracks: list[dict] = field(default_factory=list)  # everything reported, for the episode log
-    timings_ms: dict[str, float] = field(default_factory=dict)
-    skipped: str | None = None
-
-
-class PerceptionModule(Protocol):
-    name: str
-    uses_ground_truth: bool
-    uses_images: bool  # False: update() reads no depth or colour (with a known static map nothing is rendered)
-    uses_color: bool  # False: update() reads no colour (frames come without one)
-
-    def reset(self) -> None: ...
-
-    def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput: ...
-
-
-BOTTOM_EDGE_TOLERANCE = 0.15  # m: a box bottom this close above the lowest height in view is cut by the image
 PERSON_CLEAR_SPEED = 0.4  # m/s: a person-labelled track frees the map only when moving this fast
 
 
 @dataclass(frozen=True)
 class MovingTrackRule:
-    """Which tracks the planner avoids as moving obstacles besides those DODT labels dynamic.
+    """Which tracks the planner avoids as moving obstacles besides those DODT labels dynamic (the DODT
+    modes; configuration section ``moving_rule``).
 
     DODT's label decides what the map clears; it takes k + consistency frames to rise and its point
     voting is weakest for a person walking straight at the camera (the surface moves along the
-    rays, so nearest-neighbour matches fall short of the vote threshold): measured on corridor
-    seeds 0-19, most person collisions were with a person tracked at the right velocity but
-    labelled static. A planner should not ignore a tall object tracked moving at walking speed,
-    so such tracks also reach it (with their prediction), though the map is not cleared for them.
+    rays, so nearest-neighbour matches fall short of the vote threshold): a person can be tracked at
+    the right velocity but labelled static. A planner should not ignore a tall object tracked moving at
+    walking speed, so such tracks also reach it (with their prediction), though the map is not cleared
+    for them.
     """
 
     min_speed: float = 0.5  # m/s, filtered horizontal speed ...
@@ -110,10 +83,27 @@ class MovingTrackRule:
     max_footprint: float = 1.2  # m, longest horizontal side: not a wall seen end-on
     min_age: float = 0.2  # s, a track this old at least
     # A measured box lying this much (share of its footprint) on structure the map has held for a second
-    # or more is a static obstacle's edge, not a person: that track is never passed again. Measured on the
-    # logs of corridor seeds 0-39 (dodt, a snapshot approximation of the map's age): of the frame-tracks
-    # this rule passed, 991 of 2118 more than 1 m from every person were such tracks, and 25 of 470 near one
+    # or more is a static obstacle's edge, not a person: that track is never passed again
     on_structure: float = 0.2
+    # m: a box whose bottom is this close above the lowest height the camera sees at the box is taken to
+    # be cut by the image's lower edge (DODTPerception._person_tall)
+    bottom_edge_tolerance: float = 0.15
+
+    def __post_init__(self):
+        lo, hi = self.height
+        if not 0.0 <= self.min_speed <= self.max_speed:
+            raise ValueError(f"MovingTrackRule: need 0 <= min_speed <= max_speed, got {self.min_speed} and "
+                             f"{self.max_speed}")
+        if not 0.0 <= lo <= hi:
+            raise ValueError(f"MovingTrackRule: height must be [low, high] with 0 <= low <= high, got {[lo, hi]}")
+        if not self.max_footprint > 0.0:
+            raise ValueError(f"MovingTrackRule: max_footprint must be > 0, got {self.max_footprint}")
+        if not self.min_age >= 0.0 or not self.bottom_edge_tolerance >= 0.0:
+            raise ValueError(f"MovingTrackRule: min_age and bottom_edge_tolerance must be >= 0, got {self.min_age} "
+                             f"and {self.bottom_edge_tolerance}")
+        if not 0.0 <= self.on_structure <= 1.0:
+            raise ValueError(f"MovingTrackRule: on_structure is a share of the footprint, 0 to 1, got "
+                             f"{self.on_structure}")
 
 
 class DODTPerception:
@@ -159,11 +149,10 @@ class DODTPerception:
         """The rule's height test, for a box cut by the image's lower edge too.
 
         Near the camera a person's box is only what the vertical field of view shows: at 1 m a camera
-        1.2 m up sees down to 0.57 m, so the box of a person there is about 1.1 m tall, at 0.7 m 0.9 m.
-        On the logs of the 21 failed corridor episodes of seeds 0-39 (dodt), 56-86 % of the tracks on a
-        walking person 0-1.6 m from the drone failed the plain height test. A box that reaches down to the
-        lowest height the camera sees at its near side (``frame``'s pose and intrinsics) is taken to
-        reach the floor: it passes when its top is at least the rule's minimum height.
+        1.2 m up sees down to 0.57 m, so the box of a person there is about 1.1 m tall, at 0.7 m 0.9 m,
+        short of the plain height test. A box that reaches down to the lowest height the camera sees at
+        its near side (``frame``'s pose and intrinsics) is taken to reach the floor: it passes when its
+        top is at least the rule's minimum height.
         """
         lo, hi = self.moving_rule.height
         h = float(o.size[2])
@@ -180,7 +169,7 @@ class DODTPerception:
         if near <= 0.05:
             return False  # beside or behind the camera: nothing to tell from the image
         lowest = T[:3, :3] @ np.array([q[0] * near / q[2], (K.height - 1 - K.cy) * near / K.fy, near]) + T[:3, 3]
-        return bottom <= lowest[2] + BOTTOM_EDGE_TOLERANCE and top >= lo
+        return bottom <= lowest[2] + self.moving_rule.bottom_edge_tolerance and top >= lo
 
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
         r = self.dodt.process(frame)
@@ -204,24 +193,44 @@ class DODTPerception:
                                 skipped=r.skipped)
 
 
+@dataclass(frozen=True)
+class OracleConfig:
+    """The oracle modes' settings (configuration section ``oracle``; oracle-noisy starts from
+    ``velocity_noise = NOISY_ORACLE_VELOCITY_NOISE``)."""
+
+    max_range: float = 5.0  # m: a person is seen within this horizontal distance of the camera (nearest side)
+    memory: float = 1.0  # s: a person out of view is still reported this long after last seen
+    # s: each person's acceleration is the change of its true velocity over this window (the truth holds
+    # no acceleration); None: zero acceleration (constant-velocity predictions)
+    accel_window: float | None = 0.1
+    # m/s per horizontal axis: the reported velocity is the truth plus a random error that wanders with
+    # correlation time noise_time s (a Gauss-Markov process per person, from noise_seed and the person's
+    # id, so an episode is repeatable); 0: exact
+    velocity_noise: float = 0.0
+    noise_time: float = 0.5
+    noise_seed: int = 0
+
+    def __post_init__(self):
+        if not self.max_range > 0.0:
+            raise ValueError(f"OracleConfig: max_range must be > 0, got {self.max_range}")
+        if not self.memory >= 0.0 or not self.velocity_noise >= 0.0:
+            raise ValueError(f"OracleConfig: memory and velocity_noise must be >= 0, got {self.memory} and "
+                             f"{self.velocity_noise}")
+        if self.accel_window is not None and not self.accel_window > 0.0:
+            raise ValueError(f"OracleConfig: accel_window must be > 0 (or none), got {self.accel_window}")
+        if not self.noise_time > 0.0:
+            raise ValueError(f"OracleConfig: noise_time must be > 0, got {self.noise_time}")
+
+
 class OraclePerception:
     uses_ground_truth = True
     uses_images = False
     uses_color = False
 
-    def __init__(self, max_range: float = 5.0, memory: float = 1.0, all_around: bool = False,
-                 accel_window: float | None = 0.1, velocity_noise: float = 0.0, noise_time: float = 0.5,
-                 noise_seed: int = 0, name: str | None = None):
-        self.max_range = max_range
-        self.memory = memory
+    def __init__(self, cfg: OracleConfig = OracleConfig(), all_around: bool = False, name: str | None = None):
+        """all_around: see every person in range whatever the camera's view (oracle-360)."""
+        self.cfg = cfg
         self.all_around = all_around
-        # s: each person's acceleration is the change of its true velocity over this window (the truth
-        # holds no acceleration); None: none (constant-velocity predictions, before)
-        self.accel_window = accel_window
-        # m/s per horizontal axis: the reported velocity is the truth plus a random error that wanders
-        # with correlation time noise_time s (a Gauss-Markov process per person, from noise_seed and the
-        # person's id, so an episode is repeatable); 0: exact
-        self.velocity_noise, self.noise_time, self.noise_seed = velocity_noise, noise_time, noise_seed
         self.name = name or ("oracle-360" if all_around else "oracle")
         self.reset()
 
@@ -231,27 +240,27 @@ class OraclePerception:
         self._noise: dict[int, tuple[np.random.Generator, float, np.ndarray]] = {}  # id -> (rng, stamp, error)
 
     def _velocity_error(self, oid: int, stamp: float) -> np.ndarray:
-        if self.velocity_noise <= 0:
+        if self.cfg.velocity_noise <= 0:
             return np.zeros(3)
         if oid not in self._noise:
-            rng = np.random.default_rng([self.noise_seed, oid])
-            self._noise[oid] = (rng, stamp, np.array([*(self.velocity_noise * rng.standard_normal(2)), 0.0]))
+            rng = np.random.default_rng([self.cfg.noise_seed, oid])
+            self._noise[oid] = (rng, stamp, np.array([*(self.cfg.velocity_noise * rng.standard_normal(2)), 0.0]))
         rng, last, e = self._noise[oid]
         if stamp > last:
-            a = math.exp(-(stamp - last) / self.noise_time)
-            e = a * e + self.velocity_noise * math.sqrt(1.0 - a * a) * np.array([*rng.standard_normal(2), 0.0])
+            a = math.exp(-(stamp - last) / self.cfg.noise_time)
+            e = a * e + self.cfg.velocity_noise * math.sqrt(1.0 - a * a) * np.array([*rng.standard_normal(2), 0.0])
             self._noise[oid] = (rng, stamp, e)
         return e
 
     def _acceleration(self, oid: int, stamp: float, velocity: np.ndarray) -> np.ndarray:
-        if self.accel_window is None:
+        if self.cfg.accel_window is None:
             return np.zeros(3)
         hist = self._velocities.setdefault(oid, deque())
         hist.append((stamp, velocity.copy()))
-        while len(hist) > 2 and stamp - hist[1][0] >= self.accel_window - 1e-9:
+        while len(hist) > 2 and stamp - hist[1][0] >= self.cfg.accel_window - 1e-9:
             hist.popleft()
         dt = stamp - hist[0][0]
-        return (velocity - hist[0][1]) / dt if dt >= 0.5 * self.accel_window else np.zeros(3)
+        return (velocity - hist[0][1]) / dt if dt >= 0.5 * self.cfg.accel_window else np.zeros(3)
 
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
         if truth is None:
@@ -267,10 +276,10 @@ class OraclePerception:
             bearing, dist = bearing_and_distance(cam, heading, o.center)
             widen = math.atan2(0.5 * float(np.hypot(*o.size[:2])), max(dist, 1e-6))
             in_view = self.all_around or bearing <= half_fov + widen
-            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.max_range and in_view:
+            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.cfg.max_range and in_view:
                 self._last_seen[o.id] = truth.stamp
             seen = self._last_seen.get(o.id)
-            if seen is None or truth.stamp - seen > self.memory:
+            if seen is None or truth.stamp - seen > self.cfg.memory:
                 continue
             preds.append(ObstaclePrediction(id=o.id, center=o.center.copy(), size=o.size.copy(),
                                             velocity=vel, acceleration=acc))
@@ -295,23 +304,39 @@ class StaticOnlyPerception:
         return PerceptionOutput(stamp=frame.stamp, obstacles=())
 
 
-def make_perception(mode: str, learned_detector=None, dodt_set: tuple[str, ...] = ()) -> PerceptionModule:
+def make_perception(mode: str, learned_detector=None, settings=None) -> PerceptionModule:
     """A perception module by name: dodt (or any DODT preset), oracle, static-only, or a plug-in's
-    ``module:Class`` (experiments.plugins). dodt_set: ``section.field=value`` assignments applied to a DODT
-    preset's configuration (dodt.config.override); the other modes do not read them."""
+    ``module:Class`` (experiments.plugins). settings: configuration overrides (experiments.config.Settings),
+    each section on top of the mode's own configuration: ``dodt`` (DODT's, the preset's) and ``moving_rule``
+    for the DODT modes, ``oracle`` for the oracle modes; static-only and plug-ins read none."""
+    from experiments.config import Settings
     from experiments.plugins import is_spec, make_perception_plugin
 
     if is_spec(mode):
         return make_perception_plugin(mode)
-    if mode == "oracle":
-        return OraclePerception()
-    if mode == "oracle-360":
-        return OraclePerception(all_around=True)
-    if mode == "oracle-noisy":
-        return OraclePerception(velocity_noise=NOISY_ORACLE_VELOCITY_NOISE, name=mode)
+    settings = Settings() if settings is None else settings
+    if mode in ("oracle", "oracle-360", "oracle-noisy"):
+        own = OracleConfig(velocity_noise=NOISY_ORACLE_VELOCITY_NOISE) if mode == "oracle-noisy" else OracleConfig()
+        return OraclePerception(settings.oracle_config(own), all_around=mode == "oracle-360", name=mode)
     if mode == "static-only":
         return StaticOnlyPerception()
     if mode in PRESETS:
         return DODTPerception(mode, learned_detector=learned_detector,
-                              config=override(preset(mode), dodt_set) if dodt_set else None)
+                              moving_rule=settings.moving_rule_config(MovingTrackRule()),
+                              config=settings.dodt_config(preset(mode)))
     raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(known_modes())}")
+
+
+def config_sections(perception) -> dict:
+    """The configuration a perception module runs with, by section of experiments.config (what a summary
+    records of an overridden section): ``dodt`` for a module holding a DODT, ``moving_rule`` for the DODT
+    modes, ``oracle`` for the oracle modes."""
+    out = {}
+    dodt = getattr(perception, "dodt", None)
+    if isinstance(getattr(dodt, "cfg", None), DODTConfig):
+        out["dodt"] = dodt.cfg
+    if isinstance(perception, DODTPerception):
+        out["moving_rule"] = perception.moving_rule
+    if isinstance(perception, OraclePerception):
+        out["oracle"] = perception.cfg
+    return out

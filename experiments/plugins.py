@@ -9,7 +9,7 @@ string and load the class themselves).
 - A planner implements ``planner.types.Planner``: ``reset()`` and ``plan(PlannerInput) -> Trajectory``.
   The built-in name ``default`` is the maneuver + MPC planner behind the passive-safety shield
   (experiments.episode.default_planner).
-- A perception module implements ``experiments.perception_modes.PerceptionModule``: ``reset()`` and
+- A perception module implements ``dodt.protocol.PerceptionModule``: ``reset()`` and
   ``update(frame, truth=None) -> PerceptionOutput``; optional attributes ``uses_ground_truth`` (default
   False: ``truth`` is None), ``uses_images`` and ``uses_color`` (default True). Built-in names: the
   perception modes and DODT presets (experiments.perception_modes.known_modes).
@@ -113,7 +113,7 @@ def planner_label(spec: str | None) -> str:
 
 def make_perception_plugin(spec: str):
     """A perception module instance for a ``module:Class`` spec."""
-    return _instantiate(spec, PERCEPTION_METHODS, "perception", "experiments.perception_modes.PerceptionModule")
+    return _instantiate(spec, PERCEPTION_METHODS, "perception", "dodt.protocol.PerceptionModule")
 
 
 def check_planner(spec: str | None) -> None:

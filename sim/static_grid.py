@@ -1,6 +1,6 @@
 """The scenario's static geometry as a voxel grid: what a map built from perfect sensing would hold.
 
-A voxel is occupied when it overlaps a solid of the world the simulator builds (``sim.world``): the
+A voxel is occupied when it overlaps a solid of the world the simulator builds (``sim.scene``): the
 floor slab, the side and end walls, the ceiling when there is one, and each obstacle's footprint up
 to its height (a shelf counts as solid: its boards and posts leave no gap a drone fits through).
 People are not static and are left out. Used to plan against a known map (``dodt-nav run --map

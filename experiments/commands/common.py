@@ -194,7 +194,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
                              "module:Class with module a dotted module or a .py file; built with no arguments")
     parser.add_argument("--config", default=None, metavar="FILE.toml",
                         help="configuration overrides: TOML tables episode, shield, navigator (navigator.mpc, "
-                             "navigator.maneuvers), map, dodt (experiments.config)")
+                             "navigator.maneuvers), map, dodt, moving_rule, oracle (experiments.config)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="one override, the value a TOML literal (e.g. shield.a_brake=3.0, "
                              "navigator.mpc.horizon=30); repeatable, applied after --config")

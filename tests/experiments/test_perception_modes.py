@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dodt.frames import CameraIntrinsics
-from experiments.perception_modes import OraclePerception, known_modes, make_perception
+from experiments.perception_modes import OracleConfig, OraclePerception, known_modes, make_perception
 from sim.ground_truth import ObstacleTruth
 
 
@@ -38,7 +38,7 @@ def test_oracle_sees_its_view_and_the_all_around_oracle_everything_in_range(mode
 
 
 def test_oracle_remembers_a_person_for_its_memory_only():
-    p = OraclePerception(memory=1.0)
+    p = OraclePerception(OracleConfig(memory=1.0))
     p.update(FRAME, _truth(0.0, [AHEAD]))
     assert [o.id for o in p.update(FRAME, _truth(0.9, [BEHIND])).obstacles] == [1]  # left the view 0.9 s ago
     assert p.update(FRAME, _truth(1.1, [BEHIND])).obstacles == ()
@@ -134,7 +134,7 @@ def test_oracle_acceleration_is_the_change_of_the_true_velocity():
     dt = 1.0 / 30.0
     turning = [(math.cos(a), math.sin(a), 0.0) for a in np.linspace(0.0, math.pi / 2, 10)]
     for window, expect_turn in ((0.1, True), (None, False)):
-        p = OraclePerception(accel_window=window)
+        p = OraclePerception(OracleConfig(accel_window=window))
         outs = [p.update(FRAME, truth(k * dt, v)) for k, v in enumerate(turning)]
         (ob,) = outs[-1].obstacles
         if expect_turn:
@@ -172,3 +172,13 @@ def test_noisy_oracle_velocity_error_has_its_size_and_repeats():
     np.testing.assert_array_equal(run(), e)
     exact = make_perception("oracle").update(FRAME, _truth(0.0, [AHEAD])).obstacles[0]
     np.testing.assert_array_equal(exact.velocity, [0.5, 0.0, 0.0])
+
+
+def test_the_protocol_is_dodts_and_every_built_in_mode_implements_it():
+    import dodt.protocol
+    import experiments.perception_modes as pm
+
+    assert pm.PerceptionModule is dodt.protocol.PerceptionModule
+    assert pm.PerceptionOutput is dodt.protocol.PerceptionOutput
+    for mode in pm.MODES:
+        assert isinstance(make_perception(mode), dodt.protocol.PerceptionModule), mode

@@ -32,9 +32,39 @@ def test_sections_apply_to_their_configurations():
     assert p.cfg.a_brake == 3.0 and isinstance(p.cfg.a_brake, float) and p.cfg.drone_radius == 0.43
     assert p.planner.cfg.mpc.horizon == 30 and p.planner.cfg.cruise_speed == 1.2 and p.planner.cfg.mpc.robot_radius == 0.43
     assert s.map_config(MapConfig()).p_hit == 0.75 and s.episode_config(EpisodeConfig()).plan_rate == 5.0
-    d = make_perception("dodt-no-fat", dodt_set=s.dodt_assignments()).dodt.cfg
+    d = make_perception("dodt-no-fat", settings=s).dodt.cfg
     assert d.kalman.q_pos == 0.02 and d.ensemble.detectors == ("udepth",) and d.association.method == "center"
     assert make_perception("dodt").dodt.cfg.kalman.q_pos != 0.02  # nothing leaks into the presets
+
+
+def test_perception_sections_apply_on_top_of_each_modes_own():
+    from experiments.perception_modes import (NOISY_ORACLE_VELOCITY_NOISE, MovingTrackRule, OracleConfig,
+                                              make_perception)
+
+    s = build(None, ["moving_rule.min_speed=0.7", "moving_rule.height=[0.9, 2.4]", "oracle.max_range=8",
+                     "oracle.accel_window=none"])
+    assert make_perception("dodt", settings=s).moving_rule == MovingTrackRule(min_speed=0.7, height=(0.9, 2.4))
+    assert make_perception("dodt-no-coast", settings=s).moving_rule.min_speed == 0.7
+    oracle, noisy, around = (make_perception(m, settings=s) for m in ("oracle", "oracle-noisy", "oracle-360"))
+    assert oracle.cfg == OracleConfig(max_range=8.0, accel_window=None) and oracle.name == "oracle"
+    assert noisy.cfg.velocity_noise == NOISY_ORACLE_VELOCITY_NOISE and noisy.cfg.max_range == 8.0
+    assert around.all_around and around.cfg.max_range == 8.0 and around.name == "oracle-360"
+    quiet = build(None, ["oracle.velocity_noise=0.1"])
+    assert make_perception("oracle-noisy", settings=quiet).cfg.velocity_noise == 0.1
+    # nothing leaks into the modes' own configurations
+    assert make_perception("oracle").cfg == OracleConfig() and make_perception("dodt").moving_rule == MovingTrackRule()
+    assert make_perception("oracle-noisy").cfg == OracleConfig(velocity_noise=NOISY_ORACLE_VELOCITY_NOISE)
+
+
+@pytest.mark.parametrize("sets", [["moving_rule.min_speed=3.0", "moving_rule.max_speed=4.0"],
+                                  ["moving_rule.max_speed=4.0", "moving_rule.min_speed=3.0"]])
+def test_values_checked_together_can_be_set_in_any_order(sets):
+    from experiments.perception_modes import MovingTrackRule
+
+    rule = build(None, sets).moving_rule_config(MovingTrackRule())
+    assert (rule.min_speed, rule.max_speed) == (3.0, 4.0)
+    with pytest.raises(ConfigError, match=r"^moving_rule.min_speed, moving_rule.max_speed: MovingTrackRule: need"):
+        build(None, ["moving_rule.min_speed=3.0", "moving_rule.max_speed=2.0"])
 
 
 @pytest.mark.parametrize("sets, fragment", [
@@ -49,6 +79,15 @@ def test_sections_apply_to_their_configurations():
     (["dodt.kalman.nope=1"], "dodt.kalman.nope: KalmanConfig has no field 'nope'"),
     (["map.p_hit=2.0"], "map.p_hit: MapConfig"),
     (["shield.a_brake"], "expected section.key=value"),
+    (["navigator.mpc.horizon=30", "navigator.mpc=3"], "a key is a value or a section, not both"),
+    (["moving_rule.nope=1"], "moving_rule.nope: unknown key; MovingTrackRule has no field 'nope'"),
+    (["moving_rule.min_speed=3.0"], "moving_rule.min_speed: MovingTrackRule: need 0 <= min_speed <= max_speed"),
+    (["moving_rule.height=[2.0, 1.0]"], "moving_rule.height: MovingTrackRule: height must be [low, high]"),
+    (["moving_rule.height=1.5"], "moving_rule.height: expected a list"),
+    (["moving_rule.on_structure=2"], "moving_rule.on_structure: MovingTrackRule: on_structure is a share"),
+    (["oracle.max_range=0"], "oracle.max_range: OracleConfig: max_range must be > 0"),
+    (["oracle.noise_seed=1.5"], "oracle.noise_seed: expected a whole number, got 1.5"),
+    (["oracle.all_around=true"], "oracle.all_around: unknown key; OracleConfig has no field 'all_around'"),
 ])
 def test_bad_keys_and_values_are_one_line_errors(tmp_path, capsys, sets, fragment):
     with pytest.raises(ConfigError, match=None) as e:
@@ -79,12 +118,17 @@ def test_run_records_the_effective_configuration(tmp_path):
     out = tmp_path / "o"
     rc = main(["run", "corridor", "--seed", "0", "--perception", "oracle", "--out", str(out), "--set",
                "episode.static_map=truth", "--set", "episode.duration=1.5", "--set", "shield.a_brake=3.0",
-               "--set", "navigator.mpc.horizon=20", "--set", "map.p_hit=0.75"])
+               "--set", "navigator.mpc.horizon=20", "--set", "map.p_hit=0.75", "--set", "oracle.max_range=6",
+               "--set", "moving_rule.min_speed=0.6"])
     assert rc == 0
     s = json.loads((out / "summary.json").read_text())
     c = s["config"]
     assert c["set"] == {"episode.static_map": "truth", "episode.duration": 1.5, "shield.a_brake": 3.0,
-                        "navigator.mpc.horizon": 20, "map.p_hit": 0.75}
+                        "navigator.mpc.horizon": 20, "map.p_hit": 0.75, "oracle.max_range": 6,
+                        "moving_rule.min_speed": 0.6}
+    assert c["oracle"] == {"max_range": 6.0, "memory": 1.0, "accel_window": 0.1, "velocity_noise": 0.0,
+                           "noise_time": 0.5, "noise_seed": 0}
+    assert "moving_rule" not in c  # set, but the oracle does not use it
     assert c["shield"]["a_brake"] == 3.0 and c["shield"]["drone_radius"] > 0 and "v_max" in c["shield"]
     assert c["navigator"]["mpc"]["horizon"] == 20 and "cruise_speed" in c["navigator"]
     assert c["map"]["p_hit"] == 0.75 and c["map"]["size"][0] > 15  # sized to the corridor, then overridden
@@ -103,3 +147,25 @@ def test_a_sweep_folder_keeps_one_configuration(tmp_path, capsys):
     capsys.readouterr()
     assert main(base + ["--set", "episode.duration=1", "--set", "shield.a_brake=3.0"]) == 2
     assert "other configuration overrides" in capsys.readouterr().err
+
+
+def test_a_dodt_run_records_its_moving_rule_and_dodt_sections(tmp_path):
+    out = tmp_path / "o"
+    assert main(["run", "corridor", "--seed", "0", "--duration", "0.5", "--frame-latency", "0", "--out", str(out),
+                 "--set", "moving_rule.min_speed=0.6", "--set", "moving_rule.height=[0.9, 2.4]"]) == 0
+    c = json.loads((out / "summary.json").read_text())["config"]
+    assert c["set"] == {"moving_rule.min_speed": 0.6, "moving_rule.height": [0.9, 2.4]}
+    assert c["moving_rule"]["min_speed"] == 0.6 and c["moving_rule"]["height"] == [0.9, 2.4]
+    assert c["moving_rule"]["max_speed"] == 2.5 and "oracle" not in c and "dodt" not in c
+    with gzip.open(out / "log.jsonl.gz", "rt") as fh:
+        assert json.loads(fh.readline())["config"] == c
+
+
+def test_a_sweep_records_the_perception_sections(tmp_path):
+    out = tmp_path / "o"
+    assert main(["sweep", "corridor", "--seeds", "0", "--jobs", "1", "--quiet", "--perception", "oracle-noisy",
+                 "--map", "truth", "--out", str(out), "--set", "episode.duration=1",
+                 "--set", "oracle.memory=0.5"]) == 0
+    c = json.loads((out / "summary.json").read_text())["config"]
+    assert c["set"] == {"episode.duration": 1, "oracle.memory": 0.5}
+    assert c["oracle"]["memory"] == 0.5 and c["oracle"]["velocity_noise"] == 0.3
