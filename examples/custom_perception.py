@@ -1,6 +1,6 @@
 """A perception module of your own: DODT, reporting only the obstacles within 3 m of the camera.
 
-It implements experiments.perception_modes.PerceptionModule (``reset()`` and
+It implements dodt.protocol.PerceptionModule (``reset()`` and
 ``update(frame, truth=None) -> PerceptionOutput``, with ``name`` and the ``uses_*`` flags) and is built
 with no arguments. Try it:
 
