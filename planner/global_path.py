@@ -26,8 +26,9 @@ def block_discs(blocked, centres, radii, ox, oy, res):
         cx, cy, r = centres[m, 0], centres[m, 1], radii[m]
         if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r)):
             continue
-        i0, j0 = max(math.floor((cx - r - ox) / res), 0.0), max(math.floor((cy - r - oy) / res), 0.0)
-        i1, j1 = min(math.floor((cx + r - ox) / res), nx - 1.0), min(math.floor((cy + r - oy) / res), ny - 1.0)
+        # clamped as floats, converted after: a coordinate beyond int64 never reaches the conversion
+        i0, j0 = max(np.floor((cx - r - ox) / res), 0.0), max(np.floor((cy - r - oy) / res), 0.0)
+        i1, j1 = min(np.floor((cx + r - ox) / res), nx - 1.0), min(np.floor((cy + r - oy) / res), ny - 1.0)
         if i0 > i1 or j0 > j1:
             continue
         for i in range(int(i0), int(i1) + 1):

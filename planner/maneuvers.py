@@ -87,6 +87,14 @@ class ManeuverConfig:
     # this of that point only; farther out the grid's candidates, which score the people's futures, lead
     approach_range: float = 2.0
 
+    def __post_init__(self):
+        # the maneuver choice's branch and bound needs every cost term >= 0 (_best)
+        for name in ("p_keep", "p_stop", "p_turn", "worst_case", "w_goal", "w_hit", "w_near", "w_static", "w_keep",
+                     "w_acc", "t_fade", "t_fade_alt"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"ManeuverConfig.{name}: must be a finite number >= 0, got {v!r}")
+
 
 @dataclass(frozen=True, eq=False)
 class ViewTerm:
@@ -127,7 +135,7 @@ def _two_phase(P, V, A, p0, v0, targets, ks, dt, amax):
     acceleration that reaches the target velocity, clipped to +-amax per axis. The first phase, the same
     for every b, is computed once per a. Rows from T * T on are left to the caller."""
     T, N = targets.shape[0], P.shape[1]
-    k1 = min(ks, N)
+    k1 = max(min(ks, N), 0)
     for a in range(T):
         c0 = a * T
         for ax in range(2):
@@ -218,13 +226,15 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
     Within near_goal of the goal (gx, gy) the static thresholds are r_goal and m_goal (what the goal
     allows). Branch and bound: candidate ``first`` (-1: none) is costed first; every term is >= 0, so
     a candidate whose terms so far already exceed the least cost found cannot be the least and is left
-    (the same choice, bit for bit, as costing every candidate). owner (H,): the obstacle of each
-    hypothesis, in ascending order."""
+    (the same choice, bit for bit, as costing every candidate, the weights, priors and gamma being >= 0;
+    a NaN cost counts as infinite). owner (H,): the obstacle of each hypothesis, in ascending order."""
     C, K = P.shape[0], P.shape[1]
     nx, ny = clear.shape
     H = O.shape[0]
     start = np.zeros(n_obst + 1, np.int64)  # the hypotheses of obstacle o: start[o]:start[o + 1]
     for h in range(H):
+        if owner[h] < 0 or owner[h] >= n_obst or (h > 0 and owner[h] < owner[h - 1]):
+            raise ValueError("_best: owner must be ascending obstacle indices below n_obst")
         start[owner[h] + 1] = h + 1
     for o in range(n_obst):
         start[o + 1] = max(start[o + 1], start[o])
@@ -301,6 +311,8 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
         if cut:
             continue
         J = jg + st + dyn + kp + ef
+        if J != J:
+            J = math.inf
         if J < best_j or (J == best_j and c < best_c) or best_c < 0:
             best_j, best_c = J, c
             parts[0], parts[1], parts[2], parts[3], parts[4] = jg, st, dyn, kp, ef
@@ -402,7 +414,8 @@ class ManeuverSelector:
         """Positions (C, N, 2), velocities, accelerations of every two-phase candidate, plus, when
         approach (2,) is given, flying straight to that point and stopping there (_approach), and, when
         previous_acc (N, 2) is given, the previous choice's accelerations flown again from now (last).
-        out: a dict whose arrays are reused from call to call (new arrays when None)."""
+        out: a dict whose arrays are reused from call to call (new arrays when None): the arrays returned
+        are then that dict's, overwritten by the next call."""
         e = np.asarray(guide_dir, float)[:2]
         e = e / max(np.linalg.norm(e), 1e-9)
         n = np.array([-e[1], e[0]])

@@ -210,7 +210,7 @@ class MPCPlanner:
         h = self.cfg.maneuvers.band_half_height
         solid = occ.column_blocked(z - h, z + h, inflate=False)
         blocked = occ.column_blocked(z - self.cfg.band_half_height, z + self.cfg.band_half_height, inflate=True)
-        key = (occ.xy_origin.tobytes(), occ.res, tuple(np.round(inp.goal, 6)),
+        key = (occ.xy_origin.tobytes(), occ.res, np.asarray(inp.goal, float).tobytes(),
                None if fence is None else tuple(np.r_[fence[0], fence[1]]))
         f = self._fields
         if f is None or f[0] != key or not (np.array_equal(f[1], solid) and np.array_equal(f[2], blocked)):

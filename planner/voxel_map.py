@@ -363,6 +363,7 @@ class VoxelMap:
             d = d[m:d.shape[0] - m:sk, m:d.shape[1] - m:sk]
             out["bad_pixels"] = int(np.count_nonzero(~(np.isfinite(d) & (d >= 0))))
         out["ms"] = (time.perf_counter() - t0) * 1e3
+        self.version += 1  # (also bumped on entry: nothing cached while the update ran is kept)
         return out
 
     # -- queries ---------------------------------------------------------------------------------------
@@ -462,7 +463,8 @@ class VoxelMap:
     def column_blocked(self, z_lo: float, z_hi: float, inflate: bool = True) -> np.ndarray:
         """(nx, ny) bool: a column is blocked if a voxel overlapping the band [z_lo, z_hi] is occupied,
         the occupied set first grown by the robot-size inflation in x, y and z when ``inflate``.
-        Read-only: the result is shared by every caller until the map changes (copy it to edit)."""
+        Read-only: the result is shared by every caller until the map changes (copy it to edit; writing it
+        raises). Code that writes ``log_odds`` itself must bump ``version`` after."""
         r = self.inflation if inflate else np.zeros(3, np.int64)
         k0 = int(np.floor((z_lo - self.origin[2]) / self.res)) - r[2]
         k1 = int(np.floor((z_hi - self.origin[2]) / self.res)) + r[2]
@@ -483,6 +485,7 @@ class VoxelMap:
             col.flags.writeable = False
             self._columns[key] = col
         return col
+
 
 def bench_update(n: int = 60) -> dict:
     """Median and p95 update time [ms] of 640x480 frames from a camera 1.2 m up flying along a 4 m wide,

@@ -237,9 +237,7 @@ def _costs_by_definition(P, A, stop, clear, goal, O, R, owner, prior, gamma, kee
     return np.array(out)
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_branch_and_bound_picks_the_least_cost_candidate(seed):
-    from planner.maneuvers import _best
+def _random_case(seed):
     rng = np.random.default_rng(seed)
     cfg, C, K = ManeuverConfig(), 300, 25
     P = np.cumsum(rng.normal(0.0, 0.15, (C, K, 2)), axis=1) + np.array([3.0, 0.0])
@@ -255,15 +253,32 @@ def test_branch_and_bound_picks_the_least_cost_candidate(seed):
     gamma = rng.random((len(owner), K))
     keep = P[7, :10] + rng.normal(0.0, 0.05, (10, 2))
     goal_xy = np.array([4.0, 0.5])  # near the candidates: the goal's own static thresholds are used
-    ref = _costs_by_definition(P, A, stop, clear, goal, O, R, owner, prior, gamma, keep, cfg, R_ROBOT, goal_xy,
-                               0.3, 0.05)
+    return dict(P=P, A=A, stop=stop, clear=clear, goal=goal, O=O, R=R, owner=owner, prior=prior, gamma=gamma,
+                keep=keep, goal_xy=goal_xy, cfg=cfg)
+
+
+def _run_best(k, first):
+    from planner.maneuvers import _best
+    cfg, parts = k["cfg"], np.empty(5)
+    b, cost = _best(k["P"], k["A"], k["stop"], k["clear"], k["goal"], ORIGIN[0], ORIGIN[1], RES, k["O"], k["R"],
+                    k["owner"], k["prior"], 3, k["gamma"], k["keep"], R_ROBOT, cfg.static_margin, cfg.dynamic_margin,
+                    cfg.w_goal, cfg.w_hit, cfg.w_static, cfg.w_near, cfg.worst_case, cfg.w_keep, cfg.w_acc,
+                    k["goal_xy"][0], k["goal_xy"][1], cfg.near_goal, 0.3, 0.05, first, parts)
+    return b, cost, parts
+
+
+def _reference(k):
+    return _costs_by_definition(k["P"], k["A"], k["stop"], k["clear"], k["goal"], k["O"], k["R"], k["owner"],
+                                k["prior"], k["gamma"], k["keep"], k["cfg"], R_ROBOT, k["goal_xy"], 0.3, 0.05)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_branch_and_bound_picks_the_least_cost_candidate(seed):
+    k = _random_case(seed)
+    ref = _reference(k)
     J = ref.sum(axis=1)
     for first in (-1, 7, int(np.argmax(J))):
-        parts = np.empty(5)
-        b, cost = _best(P, A, stop, clear, goal, ORIGIN[0], ORIGIN[1], RES, O, R, owner, prior, n_obst, gamma, keep,
-                        R_ROBOT, cfg.static_margin, cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static,
-                        cfg.w_near, cfg.worst_case, cfg.w_keep, cfg.w_acc, goal_xy[0], goal_xy[1], cfg.near_goal,
-                        0.3, 0.05, first, parts)
+        b, cost, parts = _run_best(k, first)
         assert b == int(np.argmin(J))
         assert cost == pytest.approx(J.min(), rel=1e-12)
         np.testing.assert_allclose(parts, ref[b], rtol=1e-12, atol=1e-12)
@@ -279,3 +294,20 @@ def test_candidates_reuse_their_buffers_without_changing_them():
     assert again[0] is out["P"]
     for x, y in zip(fresh, again):
         assert np.array_equal(x, y)
+
+
+def test_branch_and_bound_breaks_ties_and_infinities_as_argmin_does():
+    k = _random_case(0)
+    b = int(np.argmin(_reference(k).sum(axis=1)))
+    src, dup = (b, 0) if b > 0 else (0, 5)
+    for name in ("P", "A", "stop"):
+        k[name][dup] = k[name][src]  # an equal candidate
+    first = max(src, dup)
+    assert _run_best(k, first)[0] == min(src, dup)  # the first of equals, though the later was costed first
+    k["goal"] = np.full_like(k["goal"], np.inf)  # no way to the goal: every cost infinite
+    assert _run_best(k, 7)[0] == 0
+
+
+def test_maneuver_weights_must_not_be_negative():
+    with pytest.raises(ValueError, match="w_near"):
+        ManeuverConfig(w_near=-1.0)
