@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from experiments import bench_perception, sweep
@@ -55,6 +56,11 @@ DIFFERENCES = """\
 """
 
 
+def _folder(mode: str) -> str:
+    """The navigation sweep's folder of a perception mode (a plug-in's module:Class made a file name)."""
+    return "nav_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", mode)
+
+
 def _md_rates(agg: dict) -> str:
     r = agg["rates"]
     f = lambda k: f"{100 * r[k]['rate']:.1f} % [{100 * r[k]['ci95'][0]:.1f}, {100 * r[k]['ci95'][1]:.1f}]"  # noqa: E731
@@ -65,11 +71,15 @@ def _md_rates(agg: dict) -> str:
 
 
 def reproduce(out: Path, quick: bool = False, jobs: int = 2, plan: Plan | None = None, scenario: str = "corridor",
-              settings=None, planner: str | None = None) -> Path:
+              settings=None, planner: str | None = None, perception: tuple[str, ...] = ()) -> Path:
     """Run every part and write out/report.md; ``plan`` overrides the FULL / QUICK sizes (tests). settings
     (experiments.config) and planner (a ``module:Class`` spec, None: the default) apply to the navigation
-    sweeps; Tables I and II measure the DODT presets as they are."""
+    sweeps; Tables I and II measure the DODT presets as they are. perception: ``module:Class`` specs of
+    perception plug-ins, each flown in one more navigation sweep with as many seeds as dodt."""
     plan = plan or (QUICK if quick else FULL)
+    if perception:
+        n = plan.nav_seeds.get("dodt", max(plan.nav_seeds.values(), default=1))
+        plan = replace(plan, nav_seeds={**plan.nav_seeds, **{p: n for p in perception}})
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -93,9 +103,9 @@ def reproduce(out: Path, quick: bool = False, jobs: int = 2, plan: Plan | None =
     for mode, n in plan.nav_seeds.items():
         t = time.perf_counter()
         print(f"== navigation sweep: {scenario}, {mode}, seeds 0:{n}", flush=True)
-        agg = sweep.run_sweep(scenario, list(range(n)), mode, out / f"nav_{mode}", jobs=jobs, settings=settings,
+        agg = sweep.run_sweep(scenario, list(range(n)), mode, out / _folder(mode), jobs=jobs, settings=settings,
                               planner=planner)
-        plot_sweep(out / f"nav_{mode}" / sweep.RESULTS, out / f"nav_{mode}")
+        plot_sweep(out / _folder(mode) / sweep.RESULTS, out / _folder(mode))
         nav[mode] = agg
         timings[f"navigation sweep ({mode}, {n} seeds)"] = time.perf_counter() - t
 
@@ -124,10 +134,10 @@ def reproduce(out: Path, quick: bool = False, jobs: int = 2, plan: Plan | None =
         L += ["", "Environment (outcomes agree bit for bit only within one; compare sweeps run in the same): "
               + "; ".join(sweep.describe_environment(e) for e in envs)]
     for mode in nav:
-        L += ["", f"### {mode}", "", f"![outcomes](nav_{mode}/sweep_outcomes.png)",
-              f"![min clearance](nav_{mode}/sweep_min_clearance.png)", "",
-              f"Per-seed results: `nav_{mode}/summary.md`; failed episodes keep their logs under "
-              f"`nav_{mode}/episodes/` (`dodt-nav replay` turns one into an HTML replay)."]
+        L += ["", f"### {mode}", "", f"![outcomes]({_folder(mode)}/sweep_outcomes.png)",
+              f"![min clearance]({_folder(mode)}/sweep_min_clearance.png)", "",
+              f"Per-seed results: `{_folder(mode)}/summary.md`; failed episodes keep their logs under "
+              f"`{_folder(mode)}/episodes/` (`dodt-nav replay` turns one into an HTML replay)."]
     L += ["", DIFFERENCES, "## Wall time of each part", ""]
     L += [f"- {k}: {v:.0f} s" for k, v in timings.items()]
     report = out / "report.md"

@@ -104,12 +104,16 @@ def add_parser(sub) -> None:
                     "with the same folder resumes the sweeps. --quick shrinks every part to finish in minutes; "
                     "its figures are a smoke test, not results.",
         epilog=examples("dodt-nav reproduce --quick --out runs/reproduce_quick",
-                        "dodt-nav reproduce --out runs/reproduce --jobs 8",
-                        "dodt-nav reproduce --out runs/reproduce_brake3 --set shield.a_brake=3.0"),
+                        "dodt-nav reproduce --out runs/reproduce_brake3 --set shield.a_brake=3.0",
+                        "dodt-nav reproduce --quick --out runs/reproduce_near "
+                        "--perception examples/custom_perception.py:NearDODT"),
         func=cmd_reproduce)
     rep.add_argument("--out", required=True, help="output folder (rerun to resume the sweeps)")
     rep.add_argument("--quick", action="store_true", help="a small version that finishes in minutes")
     rep.add_argument("--jobs", type=jobs, default=default_jobs(), help="parallel episodes")
+    rep.add_argument("--perception", action="append", default=[], metavar="module:Class",
+                     help="your own perception class, flown in one more navigation sweep beside dodt, oracle "
+                          "and static-only (as many seeds as dodt); repeatable")
     add_config_options(rep)
 
 
@@ -224,7 +228,12 @@ def cmd_reproduce(args) -> int:
     from experiments.reproduce import reproduce
 
     planner = check_planner(args.planner)
+    for spec in args.perception:
+        if ":" not in spec:
+            raise UserError(f"--perception: {spec!r} is not module:Class; the built-in modes are flown already")
+        check_perception(spec)
     config = settings(args)
     output_folder(args.out)
-    reproduce(Path(args.out), quick=args.quick, jobs=args.jobs, settings=config, planner=planner)
+    reproduce(Path(args.out), quick=args.quick, jobs=args.jobs, settings=config, planner=planner,
+              perception=tuple(args.perception))
     return 0

@@ -2,6 +2,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -68,11 +69,17 @@ def test_reproduce_options_reach_the_report(monkeypatch, tmp_path):
 
     calls = []
     monkeypatch.setattr(experiments.reproduce, "reproduce",
-                        lambda out, quick, jobs, settings, planner: calls.append((out, quick, jobs, settings, planner)))
+                        lambda out, quick, jobs, settings, planner, perception:
+                        calls.append((out, quick, jobs, settings, planner, perception)))
     assert main(["reproduce", "--out", str(tmp_path / "rep"), "--quick", "--jobs", "1"]) == 0
-    assert calls == [(tmp_path / "rep", True, 1, Settings(), None)]
+    assert calls == [(tmp_path / "rep", True, 1, Settings(), None, ())]
     assert main(["reproduce", "--out", str(tmp_path / "rep"), "--set", "shield.a_brake=3.0"]) == 0
     assert calls[-1][3].assignments() == {"shield.a_brake": 3.0}
+    near = str(Path(__file__).resolve().parents[2] / "examples" / "custom_perception.py") + ":NearDODT"
+    assert main(["reproduce", "--out", str(tmp_path / "rep"), "--perception", near]) == 0
+    assert calls[-1][5] == (near,)
+    assert main(["reproduce", "--out", str(tmp_path / "rep"), "--perception", "oracle"]) == 2  # flown already
+    assert main(["reproduce", "--out", str(tmp_path / "rep"), "--perception", "nowhere:Nothing"]) == 2
 
 
 @pytest.mark.parametrize("renderer", ["gl", "pybullet", "egl", "tiny", None])
