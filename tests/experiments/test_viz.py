@@ -133,8 +133,15 @@ def _evaluate(chromium: str, page, profile, expression: str, width: int = 800, h
 _PLAYER_CHECK = """(async () => {
   const frames = n => new Promise(done => { const step = () => (--n > 0) ? requestAnimationFrame(step)
                                                                           : done(); requestAnimationFrame(step); });
-  await frames(10);
   const out = {controls: {}}, anim = viewer.animator;
+  const button = document.getElementById("play-pause"), slider = document.getElementById("time-slider");
+  // the playing state first, and paused at once: on a loaded machine a few frames can outlast the 3 s
+  // animation, which then stops by itself
+  await frames(2);
+  out.playing_on_load = anim.playing; out.label_on_load = button.textContent;
+  button.click(); await frames(3);
+  out.paused = !anim.playing; out.label_paused = button.textContent;
+  const t = anim.time; await frames(10); out.time_held = anim.time === t;
   for (const id of ["play-pause", "time-slider", "time-label"]) {
     const el = document.getElementById(id), r = el.getBoundingClientRect(), st = getComputedStyle(el);
     const top = document.elementFromPoint(r.left + r.width / 2, r.top + r.height / 2);
@@ -143,12 +150,7 @@ _PLAYER_CHECK = """(async () => {
       && parseFloat(st.opacity) > 0.5, on_top: top === el || el.contains(top)};
   }
   const drone = () => viewer.scene_tree.find(["meshcat", "drone"]).object.position.x;
-  const button = document.getElementById("play-pause"), slider = document.getElementById("time-slider");
-  out.playing_on_load = anim.playing; out.label_on_load = button.textContent;
   out.duration = anim.duration; out.slider_max = parseFloat(slider.max);
-  button.click(); await frames(3);
-  out.paused = !anim.playing; out.label_paused = button.textContent;
-  const t = anim.time; await frames(10); out.time_held = anim.time === t;
   const seek = v => { slider.value = v; slider.dispatchEvent(new Event("input")); };
   seek(0); await frames(2); out.x_start = drone(); out.text_start = document.getElementById("time-label").textContent;
   seek(slider.max); await frames(2); out.x_end = drone(); out.time_end = anim.time;
