@@ -32,16 +32,13 @@ def add_parser(sub) -> None:
     w.add_argument("scenario", help="a scenario file, or the name of a shipped one")
     w.add_argument("--seeds", default="0:20", help="start:stop, a number, or a comma list (default 0:20)")
     w.add_argument("--perception", default="dodt", help=PERCEPTION_HELP)
-    w.add_argument("--jobs", type=jobs, default=default_jobs(), help="parallel episodes (default: CPUs)")
-    w.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
+    _add_run_options(w)
     w.add_argument("--max-collision-rate", type=fraction, default=None,
                    help="exit with status 1 when the rate of episodes with any collision exceeds this fraction")
     w.add_argument("--max-at-fault-rate", type=fraction, default=None,
                    help="exit with status 1 when the rate of episodes with an at-fault collision exceeds this fraction")
     w.add_argument("--junit", default=None, help="write JUnit XML, one test case per seed")
-    w.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
     w.add_argument("--keep-logs", action="store_true", help="keep the episode logs of successful episodes too")
-    w.add_argument("--quiet", action="store_true", help="no progress bar")
     add_episode_options(w)
 
     bm = add_command(
@@ -69,12 +66,9 @@ def add_parser(sub) -> None:
                                                         "(default: dodt,oracle,static-only)")
     bm.add_argument("--people", default="blind,aware",
                     help="blind (people do not see the drone), aware (they do), or both (default)")
-    bm.add_argument("--jobs", type=jobs, default=default_jobs(), help="parallel episodes (default: CPUs)")
-    bm.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
-    bm.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
+    _add_run_options(bm)
     bm.add_argument("--quick", action="store_true",
                     help="smoke-sized: 2 seeds, corridor and head_on, oracle on the known map (unless given)")
-    bm.add_argument("--quiet", action="store_true", help="no progress bar")
     add_episode_options(bm)
 
     cp = add_command(
@@ -115,6 +109,14 @@ def add_parser(sub) -> None:
                      help="your own perception class, flown in one more navigation sweep beside dodt, oracle "
                           "and static-only (as many seeds as dodt); repeatable")
     add_config_options(rep)
+
+
+def _add_run_options(parser) -> None:
+    """--jobs, --dask, --out and --quiet of the commands that fly many resumable episodes (sweep, benchmark)."""
+    parser.add_argument("--jobs", type=jobs, default=default_jobs(), help="parallel episodes (default: CPUs)")
+    parser.add_argument("--dask", default=None, metavar="ADDRESS", help="run on a Dask distributed scheduler")
+    parser.add_argument("--out", required=True, help="output folder (rerun with the same folder to resume)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def _families() -> str:
@@ -225,11 +227,12 @@ def cmd_compare(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
+    from experiments.plugins import is_spec
     from experiments.reproduce import reproduce
 
     planner = check_planner(args.planner)
     for spec in args.perception:
-        if ":" not in spec:
+        if not is_spec(spec):
             raise UserError(f"--perception: {spec!r} is not module:Class; the built-in modes are flown already")
         check_perception(spec)
     config = settings(args)
