@@ -41,15 +41,13 @@ class _Recorder:
         self.planner.reset()
 
     def plan(self, inp: PlannerInput) -> Trajectory:
-        occ = inp.occupancy  # the input as the planner gets it, before the call
-        kept = replace(inp, occupancy=None, seen=copy.deepcopy(inp.seen))
-        packed = None if occ is None else np.packbits(occ.log_odds >= occ.l_occ)
-        try:
-            out = self.planner.plan(inp)
-        finally:
-            self.snapshots.append(_Snapshot(kept, packed, None if occ is None else occ.cfg,
-                                            None if occ is None else occ.version, None))
-        self.snapshots[-1] = replace(self.snapshots[-1], plan=out)
+        occ = inp.occupancy  # the input as the planner gets it, before the call (kept if the call raises)
+        snap = _Snapshot(replace(inp, occupancy=None, seen=copy.deepcopy(inp.seen)),
+                         None if occ is None else np.packbits(occ.log_odds >= occ.l_occ),
+                         None if occ is None else occ.cfg, None if occ is None else occ.version, None)
+        self.snapshots.append(snap)
+        out = self.planner.plan(inp)
+        self.snapshots[-1] = replace(snap, plan=out)
         return out
 
     @property

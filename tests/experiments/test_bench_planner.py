@@ -1,4 +1,6 @@
 """The planner replay benchmark (experiments.bench_planner): recorded inputs replay to the same plans."""
+from dataclasses import replace
+
 import numpy as np
 
 from experiments import bench_planner
@@ -17,7 +19,7 @@ def test_replayed_plans_equal_the_closed_loops():
 def test_a_changed_input_changes_the_replayed_plan():
     snaps = bench_planner.record("corridor", 0, perception="oracle", duration=2.0, static_map="depth")
     s = snaps[5]
-    moved = bench_planner._Snapshot(bench_planner.replace(s.inp, goal=s.inp.goal + np.array([0.0, 1.0, 0.0])),
+    moved = bench_planner._Snapshot(replace(s.inp, goal=s.inp.goal + np.array([0.0, 1.0, 0.0])),
                                     s.occupied, s.map_cfg, s.map_version, s.plan)
     out = bench_planner.replay(snaps[:5] + [moved], load_vehicle().radius, repeats=1)
     assert out["same"] == 5  # the comparison sees a different plan
