@@ -74,7 +74,9 @@ class MovingTrackRule:
     rays, so nearest-neighbour matches fall short of the vote threshold): a person can be tracked at
     the right velocity but labelled static. A planner should not ignore a tall object tracked moving at
     walking speed, so such tracks also reach it (with their prediction), though the map is not cleared
-    for them.
+    for them. A track passed once (labelled dynamic, or by this rule) stays passed below min_speed: a
+    walker slowing down to turn or stop loses DODT's label and its walking speed, not the chance that
+    it walks on into the drone's way.
     """
 
     min_speed: float = 0.5  # m/s, filtered horizontal speed ...
@@ -120,6 +122,7 @@ class DODTPerception:
         # then checked against the static map (MovingTrackRule.on_structure)
         self.structure_test = None
         self._on_structure: set[int] = set()
+        self._passed: set[int] = set()  # tracks the rule has passed: kept however slow they become
 
     @property
     def uses_color(self) -> bool:
@@ -129,6 +132,7 @@ class DODTPerception:
     def reset(self) -> None:
         self.dodt.reset()
         self._on_structure = set()
+        self._passed = set()
 
     def _moving(self, o, frame: SensorFrame | None = None) -> bool:
         m = self.moving_rule
@@ -136,13 +140,15 @@ class DODTPerception:
             return False
         v = o.velocity if o.filter_velocity is None else o.filter_velocity  # a static track reports none
         speed = float(np.hypot(v[0], v[1]))
-        if not (max(o.size[0], o.size[1]) <= m.max_footprint and m.min_speed <= speed <= m.max_speed):
+        slow_ok = o.id in self._passed  # a walker slowing down to turn or stop is still a walker
+        if not (max(o.size[0], o.size[1]) <= m.max_footprint and (slow_ok or m.min_speed <= speed) and speed <= m.max_speed):
             return False
         if o.id in self._on_structure:
             return False
         if self.structure_test is not None and not o.coasting and self.structure_test(o.center, o.size) >= m.on_structure:
             self._on_structure.add(o.id)
             return False
+        self._passed.add(o.id)
         return True
 
     def _person_tall(self, o, frame: SensorFrame | None) -> bool:
@@ -175,7 +181,9 @@ class DODTPerception:
         r = self.dodt.process(frame)
         preds, boxes = [], []
         for o in r.obstacles:
-            if not (o.dynamic or self._moving(o, frame)):
+            if o.dynamic:
+                self._passed.add(o.id)
+            elif not self._moving(o, frame):
                 continue
             # the filter's velocity: a track the moving rule passes may be labelled static (zero velocity)
             v = o.velocity if o.filter_velocity is None else o.filter_velocity

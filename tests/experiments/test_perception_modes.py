@@ -60,7 +60,7 @@ def _track(coasting, speed=0.8, dynamic=False, size=(0.5, 0.5, 1.7)):
 def _rule_only(rule):
     from experiments.perception_modes import DODTPerception
     p = DODTPerception.__new__(DODTPerception)  # the rule only: no DODT pipeline needed
-    p.moving_rule, p.structure_test, p._on_structure = rule, None, set()
+    p.moving_rule, p.structure_test, p._on_structure, p._passed = rule, None, set(), set()
     return p
 
 
@@ -70,8 +70,44 @@ def test_moving_track_rule_passes_person_like_tracks_at_walking_speed():
     from experiments.perception_modes import MovingTrackRule
     p = _rule_only(MovingTrackRule())
     assert p._moving(_track(coasting=False)) and p._moving(_track(coasting=True))
-    assert not p._moving(_track(coasting=False, speed=0.2))
+    assert not _rule_only(MovingTrackRule())._moving(_track(coasting=False, speed=0.2))  # never seen walking
     assert not p._moving(_track(coasting=False, size=(2.5, 0.3, 1.7)))
+
+
+def test_moving_track_rule_keeps_a_walker_that_slows_down():
+    """A track passed once stays passed when it slows below min_speed (a walker slowing to turn or stop);
+    one never passed does not reach the planner slow; the other tests still apply to both."""
+    from experiments.perception_modes import MovingTrackRule
+    p = _rule_only(MovingTrackRule())
+    assert not p._moving(_track(coasting=False, speed=0.1))  # never seen walking
+    assert p._moving(_track(coasting=False, speed=1.0))
+    assert p._moving(_track(coasting=False, speed=0.1)) and p._moving(_track(coasting=False, speed=0.0))
+    assert not p._moving(_track(coasting=False, speed=0.1, size=(2.5, 0.3, 1.7)))  # not a person's footprint
+    assert not p._moving(_track(coasting=False, speed=3.0))  # faster than anyone walks
+
+
+def test_a_dynamic_track_that_slows_down_still_reaches_the_planner():
+    """A walker DODT labelled dynamic, then static as it slows to 0.2 m/s: still reported, with the filter's
+    velocity; the map is cleared only under the dynamic label."""
+    from dodt.result import PerceptionResult, TrackedObstacle
+    from experiments.perception_modes import MovingTrackRule
+    p = _rule_only(MovingTrackRule())
+
+    def frame(dynamic, speed):
+        v = np.array([speed, 0.0, 0.0])
+        o = TrackedObstacle(id=4, center=np.array([3.0, 0.0, 0.85]), size=np.array([0.5, 0.5, 1.7]),
+                            velocity=v if dynamic else np.zeros(3), acceleration=np.zeros(3), dynamic=dynamic,
+                            coasting=False, age=2.0, history=np.zeros((0, 4)), filter_velocity=v)
+        p.dodt = SimpleNamespace(process=lambda f: PerceptionResult(stamp=0.0, seq=0, obstacles=(o,), timings_ms={}))
+        return p.update(None)
+
+    first = frame(True, 1.0)
+    assert [o.id for o in first.obstacles] == [4] and len(first.clear_boxes) == 1
+    slow = frame(False, 0.2)
+    assert [o.id for o in slow.obstacles] == [4] and slow.clear_boxes == ()
+    assert slow.obstacles[0].velocity[0] == pytest.approx(0.2)
+    p._passed.clear()  # never seen walking: a slow static track stays in the map only
+    assert frame(False, 0.2).obstacles == ()
 
 
 def test_moving_track_rule_drops_a_track_once_seen_on_long_held_structure():
