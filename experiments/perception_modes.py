@@ -122,7 +122,8 @@ class DODTPerception:
         # then checked against the static map (MovingTrackRule.on_structure)
         self.structure_test = None
         self._on_structure: set[int] = set()
-        self._passed: set[int] = set()  # tracks the rule has passed: kept however slow they become
+        # tracks passed to the planner, labelled dynamic or by the rule: passed again however slow they become
+        self._passed: set[int] = set()
 
     @property
     def uses_color(self) -> bool:
@@ -140,8 +141,8 @@ class DODTPerception:
             return False
         v = o.velocity if o.filter_velocity is None else o.filter_velocity  # a static track reports none
         speed = float(np.hypot(v[0], v[1]))
-        slow_ok = o.id in self._passed  # a walker slowing down to turn or stop is still a walker
-        if not (max(o.size[0], o.size[1]) <= m.max_footprint and (slow_ok or m.min_speed <= speed) and speed <= m.max_speed):
+        fast_enough = m.min_speed <= speed or o.id in self._passed  # a walker slowing to turn or stop is one still
+        if not (max(o.size[0], o.size[1]) <= m.max_footprint and fast_enough and speed <= m.max_speed):
             return False
         if o.id in self._on_structure:
             return False
