@@ -5,7 +5,10 @@ the person's velocity along the line between them: positive = moving toward the 
 ``window`` seconds before it, the fraction of camera frames in which the person was inside the
 camera's horizontal view within ``view_range``, tracked by perception (a reported box centre within
 ``match`` metres) and reported as a moving obstacle. A person hit from outside the view was never
-seen coming; one seen and reported moving points at the planner.
+seen coming; one seen and reported moving points at the planner. For every collision, ``off_heading``:
+the angle (degrees) between the drone's horizontal motion and the camera's heading at the contact,
+empty when the drone was at rest (0.1 m/s): over the half view, it flew where the camera did not look
+(over 90, it was backing off).
 """
 from __future__ import annotations
 
@@ -17,10 +20,17 @@ import numpy as np
 from dodt.geometry import wrap_angle
 
 HALF_FOV = math.radians(43.5)  # the D435's horizontal half field of view at 640x480 (sim/camera)
+AT_REST = 0.1  # m/s: no direction of motion below this (experiments.fault's at-rest speed)
 
 
 def _centre(person: dict) -> np.ndarray:
     return (np.asarray(person["lo"], float) + np.asarray(person["hi"], float)) / 2
+
+
+def _heading(frame: dict) -> float:
+    """The camera's heading (rad) in a frame record: the body's x axis."""
+    fwd = np.asarray(frame["R"], float).reshape(3, 3)[:2, 0]
+    return math.atan2(fwd[1], fwd[0])
 
 
 def collision_rows(records: list[dict], window: float = 2.0, view_range: float = 5.0, match: float = 0.5,
@@ -36,6 +46,9 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
         v = np.asarray(s["v"], float)[:2] if s else np.zeros(2)
         row = {"seed": header.get("seed"), "t": round(t, 3), "kind": c["kind"], "other_id": c["other_id"],
                "position": [round(float(x), 2) for x in c["position"]], "drone_speed": round(float(np.hypot(*v)), 2)}
+        if frames and float(np.hypot(*v)) > AT_REST:
+            fwd = _heading(min(frames, key=lambda r: abs(r["t"] - t)))
+            row["off_heading"] = round(math.degrees(abs(wrap_angle(math.atan2(v[1], v[0]) - fwd))), 1)
         if c["kind"] == "person" and frames:
             seen, tracked, moving = [], [], []
             for f in (f for f in frames if t - window <= f["t"] <= t):
@@ -43,9 +56,8 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                 if person is None:
                     continue
                 centre = _centre(person)[:2]
-                fwd = np.asarray(f["R"], float).reshape(3, 3)[:2, 0]  # body x: the camera's heading
                 d = centre - np.asarray(f["p"], float)[:2]
-                bearing = abs(wrap_angle(math.atan2(d[1], d[0]) - math.atan2(fwd[1], fwd[0])))
+                bearing = abs(wrap_angle(math.atan2(d[1], d[0]) - _heading(f)))
                 seen.append(bearing <= half_fov and float(np.hypot(*d)) <= view_range)
                 near = [tr for tr in f["tracks"] if float(np.hypot(*(np.asarray(tr["center"][:2]) - centre))) <= match]
                 tracked.append(bool(near))
@@ -78,8 +90,8 @@ def logs_under(path: Path) -> list[Path]:
 
 
 def format_table(rows: list[dict]) -> str:
-    cols = ["seed", "t", "kind", "other_id", "drone_speed", "drone_closing", "person_closing", "in_view", "tracked",
-            "reported_moving"]
+    cols = ["seed", "t", "kind", "other_id", "drone_speed", "off_heading", "drone_closing", "person_closing",
+            "in_view", "tracked", "reported_moving"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         lines.append("| " + " | ".join("" if r.get(k) is None else str(r[k]) for k in cols) + " |")

@@ -38,6 +38,20 @@ def test_rows_say_who_closed_in_and_whether_the_person_was_seen():
     assert person["in_view"] == person["tracked"] == person["reported_moving"] == 0.5
     assert collision_rows(_records(), window=0.9)[0]["in_view"] == 0.0  # only the last frames: out of view
     assert static["kind"] == "static" and "in_view" not in static
+    assert person["off_heading"] == static["off_heading"] == 0.0  # flying where the camera looks
+
+
+def test_off_heading_is_the_motion_against_the_camera_and_empty_at_rest():
+    recs = _records()
+    for r in recs:
+        if r["k"] == "s":
+            r["v"] = [-0.6, 0.6, 0.0]  # backing off to the left, the camera still looking along +x
+    person, _ = collision_rows(recs)
+    assert person["off_heading"] == 135.0
+    for r in recs:
+        if r["k"] == "s":
+            r["v"] = [0.05, 0.0, 0.0]
+    assert all("off_heading" not in row for row in collision_rows(recs))
 
 
 def test_cli_prints_a_table_and_names_a_folder_without_logs(tmp_path, capsys):
