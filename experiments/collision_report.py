@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from dodt.geometry import wrap_angle
+from experiments.fault import AT_REST_SPEED
 
 HALF_FOV = math.radians(43.5)  # the D435's horizontal half field of view at 640x480 (sim/camera)
-AT_REST = 0.1  # m/s: no direction of motion below this (experiments.fault's at-rest speed)
 
 
 def _centre(person: dict) -> np.ndarray:
@@ -46,8 +46,9 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
         v = np.asarray(s["v"], float)[:2] if s else np.zeros(2)
         row = {"seed": header.get("seed"), "t": round(t, 3), "kind": c["kind"], "other_id": c["other_id"],
                "position": [round(float(x), 2) for x in c["position"]], "drone_speed": round(float(np.hypot(*v)), 2)}
-        if frames and float(np.hypot(*v)) > AT_REST:
-            fwd = _heading(min(frames, key=lambda r: abs(r["t"] - t)))
+        last = min(frames, key=lambda r: abs(r["t"] - t)) if frames else None  # the frame of the contact
+        if last is not None and float(np.hypot(*v)) > AT_REST_SPEED:  # at rest: no direction of motion
+            fwd = _heading(last)
             row["off_heading"] = round(math.degrees(abs(wrap_angle(math.atan2(v[1], v[0]) - fwd))), 1)
         if c["kind"] == "person" and frames:
             seen, tracked, moving = [], [], []
@@ -62,7 +63,6 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                 near = [tr for tr in f["tracks"] if float(np.hypot(*(np.asarray(tr["center"][:2]) - centre))) <= match]
                 tracked.append(bool(near))
                 moving.append(any(tr.get("dynamic") for tr in near))
-            last = min(frames, key=lambda r: abs(r["t"] - t))
             person = next((q for q in last["people"] if q["id"] == c["other_id"]), None)
             if person is not None and s is not None:
                 d = _centre(person)[:2] - np.asarray(s["p"], float)[:2]
