@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
 
 from dodt.frames import CameraIntrinsics
 from sim.scenario import RENDERER_CHOICES, RENDERERS  # noqa: F401 (RENDERERS: re-exported)
@@ -66,11 +67,19 @@ def view_matrix(T_world_camera: np.ndarray) -> list[float]:
 
 def linearize_depth(buffer: np.ndarray, near: float = NEAR_PLANE, far: float = FAR_PLANE) -> np.ndarray:
     """Depth buffer in [0, 1] -> planar depth [m] as float32, 0 where nothing was hit."""
-    d = np.asarray(buffer, dtype=np.float32)
-    z = d * np.float32(-(far - near))
-    z += np.float32(far)  # f - (f - n) d
-    np.divide(np.float32(far * near), z, out=z)
-    z[d >= np.float32(1.0 - 1e-6)] = 0.0
+    d = np.ascontiguousarray(buffer, dtype=np.float32)
+    return _linearize(d, np.float32(-(far - near)), np.float32(far), np.float32(far * near),
+                      np.float32(1.0 - 1e-6))
+
+
+@njit(cache=True, nogil=True)
+def _linearize(d, minus_range, far, far_near, background):
+    """f n / (f - (f - n) d) in float32, in this order; 0 where d >= background (the far plane)."""
+    z = np.empty(d.shape, np.float32)
+    src, dst = d.reshape(-1), z.reshape(-1)
+    for i in range(src.size):
+        x = src[i]
+        dst[i] = np.float32(0.0) if x >= background else far_near / (x * minus_range + far)
     return z
 
 

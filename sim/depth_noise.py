@@ -16,10 +16,85 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from numba import njit
 
 from sim.scenario import Noise
 
-_KERNEL = np.ones((3, 3), np.uint8)
+_INVALID_FAR = np.float32(1e4)  # m added to invalid pixels for the neighbourhood minimum
+
+
+@njit(cache=True, nogil=True)
+def _edge_pixels(z, threshold, idx):
+    """Write into ``idx`` the flat indices, in row-major order, of the valid pixels of z whose 3x3
+    neighbourhood (clipped to the image) spans a depth jump above ``threshold`` times their depth; return
+    how many. The jump is the neighbourhood's maximum minus its minimum over valid pixels: invalid ones
+    (z <= 0) count 1e4 m farther for the minimum and as they are for the maximum. The sign of
+    max - min - threshold z is taken exactly (float64 holds the float32 product exactly)."""
+    H, W = z.shape
+    lo_c = np.empty(W, np.float32)  # per column, over rows v-1..v+1 (clipped: a border row counts twice)
+    hi_c = np.empty(W, np.float32)
+    edge = np.empty(W, np.bool_)
+    far = _INVALID_FAR
+    t = np.float64(-threshold)
+    n = 0
+    for v in range(H):
+        ra, rb = max(v - 1, 0), min(v + 1, H - 1)
+        for u in range(W):  # branch-free selects, so that the loop vectorises
+            a, b, c = z[ra, u], z[v, u], z[rb, u]
+            fa = a + far if a <= 0 else a
+            fb = b + far if b <= 0 else b
+            fc = c + far if c <= 0 else c
+            lo = fa if fa < fb else fb
+            lo_c[u] = lo if lo < fc else fc
+            hi = a if a > b else b
+            hi_c[u] = hi if hi > c else c
+        for u in range(W):
+            ua, ub = max(u - 1, 0), min(u + 1, W - 1)
+            lo = lo_c[ua] if lo_c[ua] < lo_c[u] else lo_c[u]
+            lo = lo if lo < lo_c[ub] else lo_c[ub]
+            hi = hi_c[ua] if hi_c[ua] > hi_c[u] else hi_c[u]
+            hi = hi if hi > hi_c[ub] else hi_c[ub]
+            d = z[v, u]
+            edge[u] = (d > 0) & (np.float64(d) * t + np.float64(hi - lo) > 0.0)
+        for u in range(W):
+            if edge[u]:
+                idx[n] = v * W + u
+                n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _extremes_at(z, flat_idx):
+    """(minimum over valid pixels, maximum) of z's 3x3 neighbourhoods at the given flat indices, as
+    ``_edge_pixels`` takes them."""
+    H, W = z.shape
+    lo = np.empty(flat_idx.size, np.float32)
+    hi = np.empty(flat_idx.size, np.float32)
+    for m in range(flat_idx.size):
+        v, u = flat_idx[m] // W, flat_idx[m] % W
+        a = np.float32(np.inf)
+        b = np.float32(-np.inf)
+        for r in range(max(v - 1, 0), min(v + 1, H - 1) + 1):
+            for c in range(max(u - 1, 0), min(u + 1, W - 1) + 1):
+                d = z[r, c]
+                far = d + _INVALID_FAR if d <= 0 else d
+                if far < a:
+                    a = far
+                if d > b:
+                    b = d
+        lo[m], hi[m] = a, b
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def _add_axial_noise(out, normals, c):
+    """out += (c out) out normals, then clamped at 0: the Intel RMS model's sigma = c z^2 (0 on invalid
+    pixels) times standard normal draws, in float32 in this order."""
+    flat, nrm = out.reshape(-1), normals.reshape(-1)
+    for i in range(flat.size):
+        z = flat[i]
+        z = z + ((c * z) * z) * nrm[i]
+        flat[i] = z if z > 0 else np.float32(0.0)
 
 
 def axial_sigma(z: np.ndarray, noise: Noise, focal_px: float) -> np.ndarray:
@@ -35,9 +110,9 @@ def axial_sigma(z: np.ndarray, noise: Noise, focal_px: float) -> np.ndarray:
 class DepthNoiseModel:
     """Applies ``Noise`` to float32 depth images of one size, reusing its work buffers.
 
-    Whole-image arithmetic goes through OpenCV into preallocated buffers (no temporaries:
-    fresh 1.2 MB arrays cost page faults every frame), which keeps a 640x480 frame near a
-    millisecond. ``apply`` returns a buffer that the next call overwrites.
+    Whole-image passes are compiled loops (the edge search, the axial noise) or OpenCV calls writing
+    into preallocated buffers (no temporaries: fresh 1.2 MB arrays cost page faults every frame).
+    ``apply`` returns a buffer that the next call overwrites.
     """
 
     def __init__(self, noise: Noise, focal_px: float):
@@ -48,8 +123,8 @@ class DepthNoiseModel:
     def _buffers(self, shape):
         if self._shape != shape:
             self._shape = shape
-            self._out, self._zmin, self._zmax, self._n = (np.empty(shape, np.float32) for _ in range(4))
-            self._invalid, self._edge = np.empty(shape, np.uint8), np.empty(shape, np.uint8)
+            self._out, self._zmin, self._n = (np.empty(shape, np.float32) for _ in range(3))
+            self._idx = np.empty(shape[0] * shape[1], np.int64)
 
     def apply(self, z: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         noise = self.noise
@@ -57,22 +132,10 @@ class DepthNoiseModel:
             return z
         z = np.ascontiguousarray(z, dtype=np.float32)
         self._buffers(z.shape)
-        out, zmin, zmax, n = self._out, self._zmin, self._zmax, self._n
+        out, zmin, n = self._out, self._zmin, self._n
         np.copyto(out, z)
         if noise.edge_hole_prob > 0 or noise.flying_pixel_prob > 0:
-            # Neighbourhood extremes over valid pixels only: invalid pixels are pushed far away
-            # for the minimum and are 0 for the maximum, so they make no edges by themselves.
-            invalid, edge = self._invalid, self._edge
-            cv2.compare(out, 0.0, cv2.CMP_LE, dst=invalid)
-            np.copyto(n, out)
-            cv2.add(n, 1e4, dst=n, mask=invalid)
-            cv2.erode(n, _KERNEL, dst=zmin)
-            cv2.dilate(out, _KERNEL, dst=zmax)
-            cv2.subtract(zmax, zmin, dst=n)
-            cv2.scaleAdd(out, -noise.edge_threshold, n, dst=n)  # jump - threshold * z
-            cv2.compare(n, 0.0, cv2.CMP_GT, dst=edge)
-            cv2.subtract(edge, invalid, dst=edge)  # saturating: invalid pixels are no edges
-            idx = np.flatnonzero(edge.view(np.bool_))  # 255 bytes read as True
+            idx = self._idx[:_edge_pixels(z, np.float32(noise.edge_threshold), self._idx)]
             if idx.size:
                 u = rng.random(idx.size, dtype=np.float32)
                 flat = out.reshape(-1)
@@ -80,7 +143,7 @@ class DepthNoiseModel:
                 fly = (~hole) & (u < noise.edge_hole_prob + noise.flying_pixel_prob)
                 fi = idx[fly]
                 w = rng.random(fi.size, dtype=np.float32)
-                lo, hi = zmin.reshape(-1)[fi], zmax.reshape(-1)[fi]
+                lo, hi = _extremes_at(z, fi)
                 flat[fi] = lo + w * (hi - lo)
                 flat[idx[hole]] = 0.0
         if noise.axial_model != "none":
@@ -89,15 +152,17 @@ class DepthNoiseModel:
             cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
             cv2.randn(n, 0.0, 1.0)
             if noise.axial_model == "intel_rms":  # sigma = c z^2, which is 0 on invalid pixels
-                cv2.multiply(out, out, dst=zmin, scale=noise.subpixel / (self.focal_px * noise.baseline))
+                _add_axial_noise(out, n, np.float32(noise.subpixel / (self.focal_px * noise.baseline)))
             else:
                 np.multiply(axial_sigma(out, noise, self.focal_px), out > 0, out=zmin)
-            cv2.multiply(zmin, n, dst=zmin)
-            cv2.add(out, zmin, dst=out)
+                cv2.multiply(zmin, n, dst=zmin)
+                cv2.add(out, zmin, dst=out)
+                cv2.max(out, 0.0, dst=out)
         if noise.dropout > 0:
             k = rng.binomial(out.size, noise.dropout)
             out.reshape(-1)[rng.integers(0, out.size, size=k)] = 0.0
-        cv2.max(out, 0.0, dst=out)
+        if noise.axial_model == "none":
+            cv2.max(out, 0.0, dst=out)
         return out
 
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from numba import njit
 
 from dodt.frames import CameraIntrinsics, SensorFrame
 from sim.camera import decode_render
@@ -20,6 +21,17 @@ from sim.ground_truth import GroundTruth, ObstacleTruth
 from sim.scenario import Camera
 
 MAX_DEPTH = 65.535  # m: the largest depth that uint16 millimetres hold
+
+
+@njit(cache=True, nogil=True)
+def _millimetres(z, lo, hi):
+    """float32 metres -> uint16 millimetres, rounded to the nearest; 0 outside [lo, hi] (float32 bounds)."""
+    out = np.empty(z.shape, np.uint16)
+    src, dst = z.reshape(-1), out.reshape(-1)
+    for i in range(src.size):
+        x = src[i]
+        dst[i] = 0 if (x < lo or x > hi) else np.uint16(x * np.float32(1000.0) + np.float32(0.5))
+    return out
 
 
 class ImageFinisher:
@@ -40,11 +52,7 @@ class ImageFinisher:
         cam = self.camera
         out = decode_render(rgba, zbuf, seg_ids)
         z = self.noise.apply(out.depth, self.rng)
-        z[z < cam.min_range] = 0.0
-        z[z > min(cam.max_range, MAX_DEPTH)] = 0.0
-        z *= np.float32(1000.0)
-        z += np.float32(0.5)  # round to the nearest millimetre on the cast
-        depth_mm = z.astype(np.uint16)
+        depth_mm = _millimetres(z, np.float32(cam.min_range), np.float32(min(cam.max_range, MAX_DEPTH)))
         color = out.color if self.color else None
         seg = None
         if out.segmentation is not None:

@@ -100,3 +100,54 @@ def test_range_limits_and_millimetre_quantisation():
     assert d.dtype == np.uint16
     assert d.max() <= 4000 and np.any(d == 0)  # the far end (9 m) is beyond max_range
     w.close()
+
+
+def _rough_image(seed, shape=(48, 64)):
+    """Patches of random depths with invalid pixels, rows and columns of them at the borders too."""
+    rng = np.random.default_rng(seed)
+    z = np.repeat(np.repeat(rng.uniform(0.3, 8.0, (shape[0] // 4, shape[1] // 4)), 4, 0), 4, 1).astype(np.float32)
+    z += rng.normal(0, 0.02, shape).astype(np.float32)
+    z[rng.random(shape) < 0.05] = 0.0
+    z[:, 0] = 0.0
+    z[-1, :] = 0.0
+    return z
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_edge_pixels_are_the_valid_pixels_whose_neighbourhood_jumps(seed):
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    from sim.depth_noise import _edge_pixels, _extremes_at
+
+    z = _rough_image(seed)
+    far = np.where(z <= 0, z + np.float32(1e4), z)
+    lo = minimum_filter(far, size=3, mode="nearest")  # the neighbourhood clipped to the image
+    hi = maximum_filter(z, size=3, mode="nearest")
+    jump = (hi - lo).astype(np.float64)
+    want = np.flatnonzero((z > 0) & (jump - 0.05 * z.astype(np.float64) * (1 + 1e-9) > 0))
+    want_loose = np.flatnonzero((z > 0) & (jump - 0.05 * z.astype(np.float64) * (1 - 1e-9) > 0))
+    idx = np.empty(z.size, np.int64)
+    got = idx[:_edge_pixels(z, np.float32(0.05), idx)]
+    assert set(want) <= set(got) <= set(want_loose) and np.all(np.diff(got) > 0)  # row-major order
+    a, b = _extremes_at(z, got)
+    np.testing.assert_array_equal(a, lo.reshape(-1)[got])
+    np.testing.assert_array_equal(b, hi.reshape(-1)[got])
+
+
+def test_linearised_depth_and_millimetres_follow_their_formulas_in_float32():
+    from sim.camera import FAR_PLANE, NEAR_PLANE, linearize_depth
+    from sim.frame_capture import _millimetres
+
+    d = np.random.default_rng(0).random((30, 40), dtype=np.float32)
+    d[0, :5] = 1.0
+    f = np.float32(FAR_PLANE)
+    z = linearize_depth(d)
+    want = np.float32(FAR_PLANE * NEAR_PLANE) / (d * np.float32(-(FAR_PLANE - NEAR_PLANE)) + f)
+    want[d >= np.float32(1 - 1e-6)] = 0.0
+    assert z.dtype == np.float32
+    np.testing.assert_array_equal(z, want)
+    mm = _millimetres(z, np.float32(0.2), np.float32(4.0))
+    keep = (z >= np.float32(0.2)) & (z <= np.float32(4.0))
+    assert mm.dtype == np.uint16
+    np.testing.assert_array_equal(mm[~keep], 0)
+    np.testing.assert_array_equal(mm[keep], np.floor(z[keep].astype(np.float64) * 1000 + 0.5).astype(np.uint16))
