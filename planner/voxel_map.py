@@ -88,7 +88,7 @@ def _in_regions(i, j, k, regions):
 def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, rmax, res, dims, blo, bhi,
                 regions, stamp, hits, misses, touched, base, protected):
     """Ray-cast one frame, counting hits and misses per voxel (cv: camera in voxel units). A point inside
-    a dynamic region ends a free ray, unless its voxel is ``protected`` (VoxelMap._protected).
+    a dynamic region ends a free ray, unless its voxel is ``protected`` (VoxelMap._established).
 
     stamp[k] holds the id of the last ray bundle that crossed voxel k; ids grow across frames, so
     stamp[k] >= base means "counted this frame" and stamp[k] == bid "crossed by this bundle", where
@@ -265,6 +265,7 @@ class VoxelMap:
         self._since = np.zeros(self.log_odds.shape, np.int32)  # update in which each voxel became occupied
         self._covered = np.zeros(self.log_odds.shape, bool)  # under a dynamic region in the last update
         self._held = np.zeros(self.log_odds.shape, bool)  # occupied protect_before updates when first covered
+        self._protection = np.zeros(self.log_odds.shape, bool)  # update's work mask: _established in its box
         self._static_after = cfg.static_after or int(np.iinfo(np.int32).max)  # 0: never protected
         box = np.minimum(self.dims, 2 * np.ceil(np.asarray(cfg.local_update_range) / self.res) + 2)
         self._touched = np.empty(int(np.prod(box)), np.int64)
@@ -282,6 +283,7 @@ class VoxelMap:
         self._since.fill(0)
         self._covered.fill(False)
         self._held.fill(False)
+        self._cover_box = np.array([0, 0, 0, -1, -1, -1], np.int64)  # _regions_box_of the last cover
         self._updates = 0  # update() calls so far: the clock of the protection rules
         self.version += 1
 
@@ -318,19 +320,27 @@ class VoxelMap:
         self._updates += 1
         self.version += 1
         regions = [self._region(c, s) for c, s in dynamic_boxes]
-        cover = np.zeros(self.log_odds.shape, bool)
-        for r in regions:
-            if np.all(r[3:] >= r[:3]):
-                cover[r[0]:r[3] + 1, r[1]:r[4] + 1, r[2]:r[5] + 1] = True
-        first = cover & ~self._covered  # regions reaching these voxels now: were they there before?
-        self._held[first] = (self.log_odds[first] >= self.l_occ) & (self.cfg.protect_before > 0) & \
-            (self._updates - self._since[first] >= self.cfg.protect_before)
-        self._held &= cover
-        self._covered = cover
-        protected = self._protected()
-        self.log_odds[cover & ~protected] = np.float32(self.l_min)
         self._history.append(np.array(regions, np.int32).reshape(-1, 6))
         hist = np.concatenate(list(self._history))
+        # Everything below that concerns dynamic regions happens inside `box`: it holds this update's and
+        # the history's regions and the last cover, and outside it the cover, the held voxels and the
+        # protection mask are all False (protection is consulted only inside regions).
+        box, lo = self._regions_box(np.concatenate([hist, self._cover_box[None]]))
+        cover = np.zeros(tuple(s.stop - s.start for s in box), bool)
+        for r in regions:
+            if np.all(r[3:] >= r[:3]):
+                a, b = r[:3] - lo, r[3:] + 1 - lo
+                cover[a[0]:b[0], a[1]:b[1], a[2]:b[2]] = True
+        covered, held = self._covered[box], self._held[box]
+        first = cover & ~covered  # regions reaching these voxels now: were they there before?
+        held[first] = (self.log_odds[box][first] >= self.l_occ) & (self.cfg.protect_before > 0) & \
+            (self._updates - self._since[box][first] >= self.cfg.protect_before)
+        held &= cover
+        covered[...] = cover
+        self._cover_box = self._regions_box_of(np.array(regions, np.int32).reshape(-1, 6))
+        protected = self._protection
+        protected[box] = self._established(box)
+        self.log_odds[box][cover & ~protected[box]] = np.float32(self.l_min)
         T = np.asarray(T_world_camera, dtype=np.float64)
         cam = np.ascontiguousarray(T[:3, 3])
         with np.errstate(invalid="ignore"):
@@ -362,9 +372,23 @@ class VoxelMap:
             d = np.asarray(depth_m, np.float32)
             d = d[m:d.shape[0] - m:sk, m:d.shape[1] - m:sk]
             out["bad_pixels"] = int(np.count_nonzero(~(np.isfinite(d) & (d >= 0))))
+        protected[box] = False
         out["ms"] = (time.perf_counter() - t0) * 1e3
         self.version += 1  # (also bumped on entry: nothing cached while the update ran is kept)
         return out
+
+    def _regions_box_of(self, regions: np.ndarray) -> np.ndarray:
+        """[lo, hi] inclusive index bounds of the non-empty regions (rows of lo, hi); empty: hi < lo."""
+        r = regions[np.all(regions[:, 3:] >= regions[:, :3], axis=1)]
+        if not len(r):
+            return np.array([0, 0, 0, -1, -1, -1], np.int64)
+        return np.concatenate([r[:, :3].min(axis=0), r[:, 3:].max(axis=0)]).astype(np.int64)
+
+    def _regions_box(self, regions: np.ndarray) -> tuple[tuple[slice, ...], np.ndarray]:
+        """(slices, their start) of the smallest box holding the non-empty regions (empty slices if none)."""
+        b = self._regions_box_of(regions)
+        lo, hi = b[:3], np.maximum(b[3:] + 1, b[:3])
+        return tuple(slice(int(a), int(c)) for a, c in zip(lo, hi)), lo
 
     # -- queries ---------------------------------------------------------------------------------------
     def _index(self, points) -> tuple[np.ndarray, np.ndarray]:
@@ -416,10 +440,6 @@ class VoxelMap:
         since a dynamic region first came over them)."""
         return ((self.log_odds[box] >= self.l_occ) & (self._updates - self._since[box] >= self._static_after)) \
             | self._held[box]
-
-    def _protected(self) -> np.ndarray:
-        """The voxels dynamic regions leave alone: established (module docstring)."""
-        return self._established(np.s_[:, :, :])
 
     def occupied_centers(self, lo, hi) -> np.ndarray:
         """(K, 3) float64 world centres of occupied voxels whose centres lie in the AABB [lo, hi]."""
