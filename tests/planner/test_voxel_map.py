@@ -342,3 +342,42 @@ def test_column_blocked_follows_the_map_and_is_shared_read_only():
         first[0, 0] = True  # shared by every caller: not to be edited
     m.set_known(np.zeros(m.log_odds.shape, bool))  # the map changes: so does the answer
     assert not m.column_blocked(z - 0.3, z + 0.3).any() and first.any()
+
+
+@pytest.mark.parametrize("history", [1, 6])
+def test_dynamic_regions_free_and_hold_voxels_as_the_whole_grid_rule_says(history):
+    """The region bookkeeping, worked out inside the regions' box, against the rule applied to the whole
+    grid: boxes that move, vanish and come back over voxels occupied for different lengths of time."""
+    cfg = MapConfig(size=(6.0, 6.0, 2.0), origin=(-3.0, -3.0, -0.1), static_after=8, protect_before=3,
+                    dynamic_history=history)
+    m = VoxelMap(cfg)
+    rng = np.random.default_rng(4)
+    occupied = rng.random(m.log_odds.shape) < 0.2
+    m.log_odds[occupied] = np.float32(m.l_max)
+    m._since[...] = rng.integers(0, 12, m.log_odds.shape)
+    m._updates = 10
+    log_odds, held, covered = m.log_odds.copy(), np.zeros_like(occupied), np.zeros_like(occupied)
+    bad_pose = np.full((4, 4), np.nan)  # nothing is cast: only the regions act
+    K = CameraIntrinsics(8, 6, 5.0, 5.0, 4.0, 3.0)
+    for step in range(14):
+        boxes = [((rng.uniform(-3.5, 3.5), rng.uniform(-3.5, 3.5), 0.9), (0.5, 0.5, 1.8))
+                 for _ in range(rng.integers(0, 3))]
+        if step == 6:
+            boxes.append(((np.nan, 0.0, 0.9), (0.5, 0.5, 1.8)))  # a bad box: no region
+        m.update(np.zeros((6, 8), np.float32), K, bad_pose, boxes)
+        cover = np.zeros_like(occupied)
+        for c, s in boxes:
+            r = m._region(c, s)
+            cover[r[0]:r[3] + 1, r[1]:r[4] + 1, r[2]:r[5] + 1] = True
+        occ = log_odds >= m.l_occ
+        first = cover & ~covered
+        held[first] = occ[first] & (m._updates - m._since[first] >= cfg.protect_before)
+        held &= cover
+        covered = cover
+        established = (occ & (m._updates - m._since >= cfg.static_after)) | held
+        log_odds[cover & ~established] = np.float32(m.l_min)
+        np.testing.assert_array_equal(m.log_odds, log_odds)
+        np.testing.assert_array_equal(m._held, held)
+        np.testing.assert_array_equal(m._covered, covered)
+        assert not m._protection.any()
+    assert np.any(held) and np.any(occupied & (log_odds == m.l_min))  # both rules were exercised
