@@ -319,8 +319,8 @@ class VoxelMap:
         t0 = time.perf_counter()
         self._updates += 1
         self.version += 1
-        regions = [self._region(c, s) for c, s in dynamic_boxes]
-        self._history.append(np.array(regions, np.int32).reshape(-1, 6))
+        regions = np.array([self._region(c, s) for c, s in dynamic_boxes], np.int32).reshape(-1, 6)
+        self._history.append(regions)
         hist = np.concatenate(list(self._history))
         # Everything below that concerns dynamic regions happens inside `box`: it holds this update's and
         # the history's regions and the last cover, and outside it the cover, the held voxels and the
@@ -337,7 +337,7 @@ class VoxelMap:
             (self._updates - self._since[box][first] >= self.cfg.protect_before)
         held &= cover
         covered[...] = cover
-        self._cover_box = self._regions_box_of(np.array(regions, np.int32).reshape(-1, 6))
+        self._cover_box = self._regions_box_of(regions)
         protected = self._protection
         protected[box] = self._established(box)
         self.log_odds[box][cover & ~protected[box]] = np.float32(self.l_min)

@@ -23,6 +23,12 @@ from sim.scenario import Noise
 _INVALID_FAR = np.float32(1e4)  # m added to invalid pixels for the neighbourhood minimum
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _for_minimum(d):
+    """A pixel's depth as the neighbourhood minimum takes it: invalid ones (<= 0) pushed 1e4 m away."""
+    return d + _INVALID_FAR if d <= 0 else d
+
+
 @njit(cache=True, nogil=True)
 def _edge_pixels(z, threshold, idx):
     """Write into ``idx`` the flat indices, in row-major order, of the valid pixels of z whose 3x3
@@ -34,16 +40,13 @@ def _edge_pixels(z, threshold, idx):
     lo_c = np.empty(W, np.float32)  # per column, over rows v-1..v+1 (clipped: a border row counts twice)
     hi_c = np.empty(W, np.float32)
     edge = np.empty(W, np.bool_)
-    far = _INVALID_FAR
     t = np.float64(-threshold)
     n = 0
     for v in range(H):
         ra, rb = max(v - 1, 0), min(v + 1, H - 1)
         for u in range(W):  # branch-free selects, so that the loop vectorises
             a, b, c = z[ra, u], z[v, u], z[rb, u]
-            fa = a + far if a <= 0 else a
-            fb = b + far if b <= 0 else b
-            fc = c + far if c <= 0 else c
+            fa, fb, fc = _for_minimum(a), _for_minimum(b), _for_minimum(c)
             lo = fa if fa < fb else fb
             lo_c[u] = lo if lo < fc else fc
             hi = a if a > b else b
@@ -77,24 +80,20 @@ def _extremes_at(z, flat_idx):
         for r in range(max(v - 1, 0), min(v + 1, H - 1) + 1):
             for c in range(max(u - 1, 0), min(u + 1, W - 1) + 1):
                 d = z[r, c]
-                far = d + _INVALID_FAR if d <= 0 else d
-                if far < a:
-                    a = far
-                if d > b:
-                    b = d
+                a = min(a, _for_minimum(d))
+                b = max(b, d)
         lo[m], hi[m] = a, b
     return lo, hi
 
 
 @njit(cache=True, nogil=True)
 def _add_axial_noise(out, normals, c):
-    """out += (c out) out normals, then clamped at 0: the Intel RMS model's sigma = c z^2 (0 on invalid
-    pixels) times standard normal draws, in float32 in this order."""
+    """out += (c out) out normals: the Intel RMS model's sigma = c z^2 (0 on invalid pixels) times
+    standard normal draws, in float32 in this order."""
     flat, nrm = out.reshape(-1), normals.reshape(-1)
     for i in range(flat.size):
         z = flat[i]
-        z = z + ((c * z) * z) * nrm[i]
-        flat[i] = z if z > 0 else np.float32(0.0)
+        flat[i] = z + ((c * z) * z) * nrm[i]
 
 
 def axial_sigma(z: np.ndarray, noise: Noise, focal_px: float) -> np.ndarray:
@@ -157,12 +156,10 @@ class DepthNoiseModel:
                 np.multiply(axial_sigma(out, noise, self.focal_px), out > 0, out=zmin)
                 cv2.multiply(zmin, n, dst=zmin)
                 cv2.add(out, zmin, dst=out)
-                cv2.max(out, 0.0, dst=out)
         if noise.dropout > 0:
             k = rng.binomial(out.size, noise.dropout)
             out.reshape(-1)[rng.integers(0, out.size, size=k)] = 0.0
-        if noise.axial_model == "none":
-            cv2.max(out, 0.0, dst=out)
+        cv2.max(out, 0.0, dst=out)
         return out
 
 
