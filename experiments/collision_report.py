@@ -5,7 +5,10 @@ the person's velocity along the line between them: positive = moving toward the 
 ``window`` seconds before it, the fraction of camera frames in which the person was inside the
 camera's horizontal view within ``view_range``, tracked by perception (a reported box centre within
 ``match`` metres) and reported as a moving obstacle. A person hit from outside the view was never
-seen coming; one seen and reported moving points at the planner. For every collision, ``off_heading``:
+seen coming; one seen and reported moving points at the planner. ``person_min_speed``: the person's
+lowest speed over the window (a walker standing, or slowing to turn, before walking into the drone).
+``fault``: the collision's class (experiments.fault), where the log records the contact's velocity and
+point. For every collision, ``off_heading``:
 the angle (degrees) between the drone's horizontal motion and the camera's heading at the contact,
 empty when the drone was at rest (0.1 m/s): over the half view, it flew where the camera did not look
 (over 90, it was backing off).
@@ -18,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from dodt.geometry import wrap_angle
-from experiments.fault import AT_REST_SPEED
+from experiments.fault import AT_REST_SPEED, classify
 
 HALF_FOV = math.radians(43.5)  # the D435's horizontal half field of view at 640x480 (sim/camera)
 
@@ -46,17 +49,20 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
         v = np.asarray(s["v"], float)[:2] if s else np.zeros(2)
         row = {"seed": header.get("seed"), "t": round(t, 3), "kind": c["kind"], "other_id": c["other_id"],
                "position": [round(float(x), 2) for x in c["position"]], "drone_speed": round(float(np.hypot(*v)), 2)}
+        if "v" in c:
+            row["fault"] = classify(c["kind"], c["position"], c["v"], c.get("point"))
         last = min(frames, key=lambda r: abs(r["t"] - t)) if frames else None  # the frame of the contact
         if last is not None and float(np.hypot(*v)) > AT_REST_SPEED:  # at rest: no direction of motion
             fwd = _heading(last)
             row["off_heading"] = round(math.degrees(abs(wrap_angle(math.atan2(v[1], v[0]) - fwd))), 1)
         if c["kind"] == "person" and frames:
-            seen, tracked, moving = [], [], []
+            seen, tracked, moving, speeds = [], [], [], []
             for f in (f for f in frames if t - window <= f["t"] <= t):
                 person = next((q for q in f["people"] if q["id"] == c["other_id"]), None)
                 if person is None:
                     continue
                 centre = _centre(person)[:2]
+                speeds.append(float(np.hypot(*np.asarray(person["v"], float)[:2])))
                 d = centre - np.asarray(f["p"], float)[:2]
                 bearing = abs(wrap_angle(math.atan2(d[1], d[0]) - _heading(f)))
                 seen.append(bearing <= half_fov and float(np.hypot(*d)) <= view_range)
@@ -72,6 +78,8 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
             n = max(len(seen), 1)
             row.update(in_view=round(sum(seen) / n, 2), tracked=round(sum(tracked) / n, 2),
                        reported_moving=round(sum(moving) / n, 2))
+            if speeds:
+                row["person_min_speed"] = round(min(speeds), 2)
         rows.append(row)
     return rows
 
@@ -90,8 +98,8 @@ def logs_under(path: Path) -> list[Path]:
 
 
 def format_table(rows: list[dict]) -> str:
-    cols = ["seed", "t", "kind", "other_id", "drone_speed", "off_heading", "drone_closing", "person_closing",
-            "in_view", "tracked", "reported_moving"]
+    cols = ["seed", "t", "kind", "other_id", "fault", "drone_speed", "off_heading", "drone_closing",
+            "person_closing", "person_min_speed", "in_view", "tracked", "reported_moving"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         lines.append("| " + " | ".join("" if r.get(k) is None else str(r[k]) for k in cols) + " |")

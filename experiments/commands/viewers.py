@@ -37,12 +37,13 @@ def add_parser(sub) -> None:
         sub, "collisions", help="one row per collision of saved episodes: who closed in, was the person in view, "
                                 "tracked, reported moving",
         description="Print one table row per collision found in saved episode logs (single logs, run folders, or "
-                    "sweep and benchmark folders, searched for logs): seed, time, what was hit, the drone's speed, "
-                    "the angle of its motion off the camera's heading (off_heading: over 43.5 it flew where the "
-                    "camera did not look; empty at rest), who closed the gap (drone and person), and the fraction "
-                    "of camera frames in the --window "
-                    "seconds before it in which the person was in the camera's view, tracked by perception, and "
-                    "reported moving. A person hit from outside the view was never seen coming; one seen and "
+                    "sweep and benchmark folders, searched for logs): seed, time, what was hit, the fault class, "
+                    "the drone's speed, the angle of its motion off the camera's heading (off_heading: over 43.5 it "
+                    "flew where the camera did not look; empty at rest), who closed the gap (drone and person), the "
+                    "person's lowest speed in the --window seconds before it (a walker that stood or turned), and "
+                    "the fraction of camera frames in that window in which the person was in the camera's view, "
+                    "tracked by perception, and reported moving. A person hit from outside the view was never "
+                    "seen coming; one seen and "
                     "reported moving points at the planner. Prints 'no collisions' when there are none.",
         epilog=examples("dodt-nav collisions runs/first",
                         "dodt-nav collisions runs/sweep runs/benchmark --window 3"),

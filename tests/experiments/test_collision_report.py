@@ -41,6 +41,24 @@ def test_rows_say_who_closed_in_and_whether_the_person_was_seen():
     assert person["off_heading"] == static["off_heading"] == 0.0  # flying where the camera looks
 
 
+def test_rows_give_the_fault_class_and_the_persons_lowest_speed():
+    recs = _records()
+    walk = iter((0.0, 0.2, 1.0, 1.0))  # standing, then walking into the drone's side
+    for r in recs:
+        if r["k"] == "f":
+            r["people"][0]["v"] = [0.0, next(walk), 0.0]
+    person, static = collision_rows(recs)
+    assert person["person_min_speed"] == 0.0 and "fault" not in person  # no contact velocity logged
+    assert collision_rows(recs, window=0.6)[0]["person_min_speed"] == 1.0
+    for c in (r for r in recs if r["k"] == "collision"):
+        c["v"], c["point"] = [1.0, 0.0, 0.0], [0.0, -0.4, 1.2]  # touched on the right while flying on
+    person, static = collision_rows(recs)
+    assert person["fault"] == "drone_at_fault" and static["fault"] == "structure"
+    for c in (r for r in recs if r["k"] == "collision"):
+        c["v"] = [0.05, 0.0, 0.0]
+    assert collision_rows(recs)[0]["fault"] == "drone_at_rest"
+
+
 def test_off_heading_is_the_motion_against_the_camera_and_empty_at_rest():
     recs = _records()
     for r in recs:
