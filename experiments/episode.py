@@ -21,7 +21,7 @@ import numpy as np
 
 from dodt.geometry import wrap_angle
 from experiments.environment import environment
-from experiments.episode_log import EpisodeLog, r4
+from experiments.episode_log import EpisodeLog, MapChanges, r4
 from experiments.config import Settings
 from experiments.perception_modes import PerceptionModule, config_sections, make_perception
 from experiments.plugins import DEFAULT_PLANNER, is_spec, make_planner
@@ -214,6 +214,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
     accel_cmd = np.zeros(3)
     n_frames = 0
     next_snapshot = 0.0
+    map_changes = MapChanges()
     n_collisions = 0
     reason, time_to_goal = "timeout", None
     frame, truth = world.latest_frame(), world.ground_truth()  # None until the first frame arrives (latency)
@@ -247,7 +248,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
             if t >= next_snapshot:
                 idx = vmap.occupied_indices()
                 above_floor = idx[:, 2] * vmap.cfg.resolution + vmap.cfg.origin[2] >= 0.1
-                log.add({"k": "map", "t": round(t, 4), "voxels": idx[above_floor].tolist()})
+                log.add(map_changes.record(round(t, 4), idx[above_floor]))
                 next_snapshot = math.inf if known_map else t + cfg.map_snapshot_period  # a known map never changes
             if on_frame is not None:
                 on_frame({"t": frame.stamp, "frame": frame, "truth": truth, "perception": po, "map": vmap, "trajectory": traj,

@@ -11,8 +11,11 @@ Record kinds (field ``k``):
   ground truth [{id, lo, hi, v}], perc_ms, map_ms (None when the map was not updated), skipped.
 - ``plan`` (every planning period): t, status, ms (solve time), pos (every 2nd knot of the plan,
   starting at the current position), path (the global path, (K, 2), or None), n_obst.
-- ``map`` (every ``map_snapshot_period``): voxels = occupied voxel indices above the floor; centre =
-  map_origin + (index + 0.5) * map_resolution.
+- ``map`` (every ``map_snapshot_period``): the occupied voxels above the floor, as their change since
+  the previous map record: added = the indices (i, j, k) occupied now and not then, removed = those
+  occupied then and not now (the first record adds them all); ``map_snapshots`` rebuilds the full sets.
+  Centre = map_origin + (index + 0.5) * map_resolution. (Logs written before 2026-11-27 hold the full
+  set in every record, as voxels; ``map_snapshots`` reads both.)
 - ``collision``: t, kind (person | static | structure), other_id, position (the drone's), v (the
   drone's velocity), point (the point of the other body nearest the drone), other_v (the other
   body's velocity): what experiments.fault classes the collision by.
@@ -36,6 +39,54 @@ import numpy as np
 
 def r4(a) -> list:
     return [round(float(x), 4) for x in np.ravel(a)]
+
+
+_KEY_BITS = 21  # voxel indices below 2^21 per axis (the map's grid is a few hundred cells a side)
+
+
+def _keys(ijk: np.ndarray) -> np.ndarray:
+    return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
+
+
+def _ijk(keys: np.ndarray) -> np.ndarray:
+    mask = (1 << _KEY_BITS) - 1
+    return np.column_stack([keys >> (2 * _KEY_BITS), (keys >> _KEY_BITS) & mask, keys & mask])
+
+
+class MapChanges:
+    """Makes the ``map`` records: the voxels that became occupied and those that stopped being occupied
+    since the previous record. The map's occupied set (tens of thousands of voxels) changes little in a
+    second: written whole every second it was half of a log's bytes and most of its writing time."""
+
+    def __init__(self):
+        self._prev = np.zeros(0, np.int64)
+
+    def record(self, t: float, voxels: np.ndarray) -> dict:
+        """The map record at ``t`` of the occupied voxel indices ``voxels`` (M, 3)."""
+        ijk = np.asarray(voxels, dtype=np.int64).reshape(-1, 3)
+        if ijk.size and (ijk.min() < 0 or ijk.max() >> _KEY_BITS):
+            raise ValueError(f"map record at t = {t}: voxel indices outside [0, 2^{_KEY_BITS})")
+        now = np.unique(_keys(ijk))
+        added = np.setdiff1d(now, self._prev, assume_unique=True)
+        removed = np.setdiff1d(self._prev, now, assume_unique=True)
+        self._prev = now
+        return {"k": "map", "t": t, "added": _ijk(added).tolist(), "removed": _ijk(removed).tolist()}
+
+
+def map_snapshots(records) -> list[tuple[float, np.ndarray]]:
+    """(t, occupied voxel indices (M, 3), sorted) at every map record of a log's records."""
+    occupied: set = set()
+    out = []
+    for r in records:
+        if r.get("k") != "map":
+            continue
+        if "voxels" in r:  # a log written before the records held changes
+            occupied = set(map(tuple, r["voxels"]))
+        else:
+            occupied.difference_update(map(tuple, r["removed"]))
+            occupied.update(map(tuple, r["added"]))
+        out.append((r["t"], np.array(sorted(occupied), dtype=np.int64).reshape(-1, 3)))
+    return out
 
 
 class EpisodeLog:

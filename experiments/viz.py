@@ -37,7 +37,7 @@ import umsgpack
 import zmq
 from meshcat.animation import Animation
 
-from experiments.episode_log import read_log
+from experiments.episode_log import map_snapshots, read_log
 
 DRONE_SIZE = (0.51, 0.70, 0.12)  # m, the collision box of sim/assets/quadrotor.urdf
 CAMERA_OFFSET = (-0.35, -0.4, 0.6)  # the viewpoint from mid-corridor, in corridor lengths
@@ -503,10 +503,10 @@ def _replay_scene(vis, records: list[dict], frames: list[dict]) -> None:
     if paths:
         path = np.asarray(paths[-1], float)
         _line(vis["global_path"], np.c_[path[:, :2], np.full(len(path), 0.05)], GLOBAL_PATH)
-    snaps = [r for r in records if r["k"] == "map" and r.get("voxels")]
-    if snaps:
+    snaps = map_snapshots(records)
+    if snaps and len(snaps[-1][1]):
         res = float(header["map_resolution"])
-        c = _voxel_centers(snaps[-1]["voxels"], header["map_origin"], res, corridor)
+        c = _voxel_centers(snaps[-1][1], header["map_origin"], res, corridor)
         _points(vis["voxels"], c, _height_colors(c[:, 2], corridor["height"]), 0.7 * res)
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from conftest import make_scenario
 from experiments.episode import EpisodeConfig, run_episode
-from experiments.episode_log import read_log
+from experiments.episode_log import map_snapshots, read_log
 from experiments.episode_metrics import summarize
 from experiments.perception_modes import PerceptionOutput
 from planner.types import ObstaclePrediction
@@ -140,9 +140,9 @@ def test_known_static_map_renders_nothing_and_holds_the_geometry(tmp_path):
     assert s["timing"]["renderer"] == "none" and s["static_map"] == "truth"
     recs = read_log(tmp_path / "log.jsonl.gz")
     assert recs[0]["static_map"] == "truth"
-    maps = [r for r in recs if r["k"] == "map"]
+    maps = map_snapshots(recs)
     assert len(maps) == 1  # a known map never changes: one snapshot
-    vox = np.array(maps[0]["voxels"])
+    vox = maps[0][1]
     centres = recs[0]["map_origin"] + (vox + 0.5) * recs[0]["map_resolution"]
     in_box = np.all(np.abs(centres[:, :2] - [3.0, 1.2]) < 0.3, axis=1) & (centres[:, 2] < 1.6)
     assert in_box.sum() >= 25 * 14  # the box's footprint (6 x 6 columns, some halved) up to 1.6 m

@@ -8,11 +8,12 @@ import math
 import tempfile
 import tracemalloc
 
+import numpy as np
 import pytest
 
 from conftest import make_scenario
 from experiments.episode import EpisodeConfig, run_episode
-from experiments.episode_log import EpisodeLog, iter_log, read_log
+from experiments.episode_log import EpisodeLog, MapChanges, iter_log, map_snapshots, read_log
 from experiments.episode_metrics import summarize, summarize_log
 
 HEADER = {"k": "header", "scenario": "s", "seed": 0, "perception": "oracle", "planner": "P", "people": []}
@@ -146,3 +147,29 @@ def test_a_duration_that_is_not_a_number_of_seconds_is_refused(tmp_path):
         with pytest.raises(ValueError, match="duration"):
             run_episode(make_scenario(), seed=0, perception="oracle", out=tmp_path / "x",
                         cfg=EpisodeConfig(duration=bad, static_map="truth"))
+
+
+def test_map_records_hold_changes_and_rebuild_every_snapshot():
+    """Each map record holds what changed since the previous one; map_snapshots rebuilds the full sets,
+    sorted as the map lists them, and reads logs whose records hold the full set too."""
+    rng = np.random.default_rng(1)
+    grid = np.argwhere(np.ones((60, 20, 12), bool))
+    sets = [grid[rng.random(len(grid)) < f] for f in (0.05, 0.06, 0.06, 0.0, 0.04)]
+    sets[2] = sets[1]  # nothing changed
+    changes = MapChanges()
+    records = [HEADER] + [changes.record(float(t), s) for t, s in enumerate(sets)]
+    as_set = lambda a: set(map(tuple, np.asarray(a).reshape(-1, 3).tolist()))  # noqa: E731
+    assert as_set(records[1]["added"]) == as_set(sets[0]) and records[1]["removed"] == []
+    assert as_set(records[2]["added"]) == as_set(sets[1]) - as_set(sets[0])
+    assert as_set(records[2]["removed"]) == as_set(sets[0]) - as_set(sets[1])
+    assert records[3]["added"] == [] and records[3]["removed"] == []
+    assert records[4]["added"] == [] and as_set(records[4]["removed"]) == as_set(sets[2])
+    snaps = map_snapshots(records)
+    assert [t for t, _ in snaps] == [0.0, 1.0, 2.0, 3.0, 4.0]
+    for (_, got), want in zip(snaps, sets):
+        assert np.array_equal(got, want)
+    # a record that holds the whole set (logs written before) replaces it
+    old = records[:3] + [{"k": "map", "t": 9.0, "voxels": sets[4].tolist()}]
+    assert np.array_equal(map_snapshots(old)[-1][1], sets[4])
+    with pytest.raises(ValueError, match="voxel indices"):
+        MapChanges().record(0.0, np.array([[-1, 0, 0]]))

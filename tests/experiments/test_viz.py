@@ -57,6 +57,7 @@ def test_replay_is_one_offline_page_with_the_animated_scene(replay):
     cmds = _commands(html)
     paths = {c["path"] for c in cmds}
     assert {"/meshcat/drone", "/meshcat/scene/floor", "/meshcat/executed", "/meshcat/people/5"} <= paths
+    assert "/meshcat/voxels" in paths  # the map, rebuilt from the log's map records
     assert any(p.startswith("/meshcat/scene/obstacles/") for p in paths)
     anims = [c for c in cmds if c["type"] == "set_animation"]
     assert len(anims) == 1
