@@ -12,6 +12,11 @@ point. For every collision, ``off_heading``:
 the angle (degrees) between the drone's horizontal motion and the camera's heading at the contact,
 empty when the drone was at rest (0.1 m/s): over the half view, it flew where the camera did not look
 (over 90, it was backing off).
+Where the log's plan records hold the planner's ``threats`` (the default planner's shield), a person
+collision also gets ``planner_knew``: the fraction of plans over the window at which the person's centre
+lay inside a disc the planner kept its plan from, and ``known_for``: for how long before the contact
+(s, at most the window) it had known them without a break (0 when not at the last plan). A person known only a moment
+before was too close to stop for, whatever the planner; one known long before points at the planner.
 """
 from __future__ import annotations
 
@@ -42,6 +47,7 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
     header = records[0]
     states = [r for r in records if r["k"] == "s"]
     frames = [r for r in records if r["k"] == "f"]
+    plans = [r for r in records if r["k"] == "plan" and "threats" in r]
     rows = []
     for c in (r for r in records if r["k"] == "collision"):
         t = c["t"]
@@ -80,8 +86,27 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                        reported_moving=round(sum(moving) / n, 2))
             if speeds:
                 row["person_min_speed"] = round(min(speeds), 2)
+            row.update(_planner_knew(plans, frames, c["other_id"], t, window))
         rows.append(row)
     return rows
+
+
+def _planner_knew(plans: list[dict], frames: list[dict], person_id, t: float, window: float) -> dict:
+    """planner_knew and known_for of a person collision at t (module docstring); {} without threats."""
+    known, stamps = [], []
+    for p in (p for p in plans if t - window <= p["t"] <= t):
+        f = min(frames, key=lambda r: abs(r["t"] - p["t"]))
+        person = next((q for q in f["people"] if q["id"] == person_id), None)
+        if person is None:
+            continue
+        x, y = _centre(person)[:2]
+        known.append(any(math.hypot(x - d[0], y - d[1]) <= d[2] for d in p["threats"]))
+        stamps.append(p["t"])
+    if not known:
+        return {}
+    run = next((k for k in range(len(known)) if all(known[k:])), len(known))  # the last unbroken stretch
+    return {"planner_knew": round(sum(known) / len(known), 2),
+            "known_for": round(t - stamps[run], 2) if run < len(known) else 0.0}
 
 
 def logs_under(path: Path) -> list[Path]:
@@ -99,7 +124,7 @@ def logs_under(path: Path) -> list[Path]:
 
 def format_table(rows: list[dict]) -> str:
     cols = ["seed", "t", "kind", "other_id", "fault", "drone_speed", "off_heading", "drone_closing",
-            "person_closing", "person_min_speed", "in_view", "tracked", "reported_moving"]
+            "person_closing", "person_min_speed", "in_view", "tracked", "reported_moving", "planner_knew", "known_for"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         lines.append("| " + " | ".join("" if r.get(k) is None else str(r[k]) for k in cols) + " |")

@@ -89,6 +89,16 @@ def default_planner(robot_radius: float, settings: Settings | None = None) -> Pa
     return PassiveSafetyShield(MPCPlanner(nav), shield)
 
 
+def _threats(planner) -> dict:
+    """A plan record's ``threats``: the people's discs the planner kept its plan from, where it says (the
+    shield's ``threats``, (M, 3) x, y, radius); nothing for a planner that does not."""
+    th = getattr(planner, "threats", None)
+    if th is None:
+        return {}
+    th = np.asarray(th, dtype=float).reshape(-1, 3)
+    return {"threats": np.round(th[np.all(np.isfinite(th), axis=1)], 2).tolist()}
+
+
 def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePrediction, ...]:
     lag = max(now - stamp, 0.0)
     if lag == 0.0:
@@ -279,7 +289,8 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
             log.add({"k": "plan", "t": round(t, 4), "status": traj.status, "ms": round(traj.solve_ms, 3),
                      "pos": np.round(traj.positions[::2], 3).tolist(),
                      "path": None if getattr(planner, "path", None) is None else np.round(planner.path, 2).tolist(),
-                     "n_obst": len(inp.obstacles)})
+                     "n_obst": len(inp.obstacles),
+                     **_threats(planner)})
 
         p_ref, v_ref, a_ref = traj.sample(t)
         accel_cmd = a_ref

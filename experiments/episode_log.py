@@ -10,7 +10,9 @@ Record kinds (field ``k``):
   tracks (perception's report: id, center, size, velocity, dynamic, coasting, ...), people from
   ground truth [{id, lo, hi, v}], perc_ms, map_ms (None when the map was not updated), skipped.
 - ``plan`` (every planning period): t, status, ms (solve time), pos (every 2nd knot of the plan,
-  starting at the current position), path (the global path, (K, 2), or None), n_obst.
+  starting at the current position), path (the global path, (K, 2), or None), n_obst, and, from a planner
+  that says (the default one's shield), threats: [x, y, radius] of each reported or remembered person's
+  disc it kept the plan from, at the plan's time.
 - ``map`` (every ``map_snapshot_period``): the occupied voxels above the floor, as their change since
   the previous map record: added = the indices (i, j, k) occupied now and not then, removed = those
   occupied then and not now (the first record adds them all); ``map_snapshots`` rebuilds the full sets.

@@ -82,6 +82,7 @@ class PassiveSafetyShield:
         self._tracks: dict[int, tuple[float, float, ObstaclePrediction]] = {}  # id -> first, last stamp, last
         self.interventions = 0
         self._anchor = None  # (2,) where the current hold began
+        self.threats = None  # (M, 3) x, y, radius of the people's discs at the last plan (for the episode log)
 
     @property
     def path(self):
@@ -173,12 +174,14 @@ class PassiveSafetyShield:
 
     def _plan(self, inp: PlannerInput) -> Trajectory:
         c = self.cfg
+        self.threats = None
         if not valid_input(inp):
             return invalid_input_stop(inp, c.a_brake)
         if inp.occupancy is None:
             return self.planner.plan(inp)
         fields = self._clearance(inp)
         C0, Vp, R0, G = self._people(inp)
+        self.threats = np.column_stack([C0, R0])
         o, res = fields["origin"], fields["res"]
         p0, v0 = np.asarray(inp.position, float), np.asarray(inp.velocity, float)
         i, j = np.clip(np.floor((p0[:2] - o) / res).astype(int), 0, np.array(fields["clear"].shape) - 1)

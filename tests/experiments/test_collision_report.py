@@ -72,6 +72,25 @@ def test_off_heading_is_the_motion_against_the_camera_and_empty_at_rest():
     assert all("off_heading" not in row for row in collision_rows(recs))
 
 
+def test_rows_say_how_long_the_planner_knew_the_person():
+    """At 0.5 and 1.0 s a disc holds the person (1 m ahead); at 1.5 s none does; at 2.0 s one again."""
+    recs = _records()
+    discs = {0.5: [[1.1, 0.0, 0.5]], 1.0: [[1.0, 0.1, 0.4], [5.0, 0.0, 1.0]], 1.5: [[1.0, 0.0, 0.4]],
+             2.0: [[0.1, -1.0, 0.3]]}
+    recs += [{"k": "plan", "t": t, "status": "solved", "threats": d} for t, d in discs.items()]
+    person, static = collision_rows(recs)
+    assert person["planner_knew"] == 0.75 and person["known_for"] == 0.0
+    assert "planner_knew" not in static
+    recs = [r for r in recs if not (r["k"] == "plan" and r["t"] == 2.0)]
+    recs.append({"k": "plan", "t": 2.0, "status": "solved", "threats": []})
+    assert collision_rows(recs)[0]["planner_knew"] == 0.5
+    for r in recs:
+        if r["k"] == "plan" and r["t"] >= 1.5:
+            r["threats"] = [[r["t"] * 0.0, -1.0, 0.5]]  # on the person once they are to the right
+    assert collision_rows(recs)[0]["known_for"] == 1.5  # known from 0.5 s on, without a break
+    assert "planner_knew" not in collision_rows(_records())[0]  # a log without threats: nothing said
+
+
 def test_cli_prints_a_table_and_names_a_folder_without_logs(tmp_path, capsys):
     run = tmp_path / "run"
     run.mkdir()

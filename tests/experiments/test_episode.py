@@ -38,7 +38,10 @@ def test_crossing_person_episode_reaches_the_goal_without_collision(mode, tmp_pa
     assert s["planner_stats"]["fallbacks"] == 0
     # The drone had to deal with the person: it was tracked as a moving obstacle at some point.
     recs = read_log(tmp_path / "log.jsonl.gz")
-    assert any(p["n_obst"] > 0 for p in recs if p["k"] == "plan")
+    plans = [p for p in recs if p["k"] == "plan"]
+    assert any(p["n_obst"] > 0 for p in plans)
+    # the shield says which discs it kept the plans from: the person's among them while reported
+    assert all("threats" in p for p in plans) and any(len(p["threats"]) >= p["n_obst"] > 0 for p in plans)
     # Summary on disk = summary recomputed from the log (metrics come from the log alone).
     on_disk = json.loads((tmp_path / "summary.json").read_text())
     again = summarize(recs)
@@ -86,6 +89,7 @@ def test_foreign_perception_and_failing_planner_plug_in(tmp_path):
     start = np.array(make_scenario().drone.start)
     # Brake and hold at the start: the drone stays put.
     assert max(np.linalg.norm(np.array(r["p"]) - start) for r in states) < 0.1
+    assert all("threats" not in r for r in recs if r["k"] == "plan")  # a plug-in planner says none
 
 
 def test_same_seed_gives_the_same_episode():

@@ -61,6 +61,16 @@ def test_a_safe_plan_is_flown_as_planned():
     np.testing.assert_allclose(tr.positions, Straight((1.5, 0.0)).plan(inp).positions)
 
 
+def test_the_shield_says_which_discs_it_kept_the_plan_from():
+    shield = PassiveSafetyShield(Straight((1.5, 0.0)), CFG)
+    shield.plan(_input(0.0, (2.0, 0.0), (1.5, 0.0), [_person(1, (9.0, 1.5)), _person(2, (6.0, -1.0))]))
+    assert shield.threats.shape == (2, 3)
+    np.testing.assert_allclose(shield.threats[:, :2], [[9.0, 1.5], [6.0, -1.0]])
+    assert np.all(shield.threats[:, 2] >= 0.5 * math.hypot(0.5, 0.5))  # the body at least
+    shield.plan(_input(0.1, (2.15, 0.0), (1.5, 0.0), []))
+    assert shield.threats.shape == (0, 3)  # reported once only: not remembered
+
+
 def test_flying_into_a_standing_person_is_refused():
     shield = PassiveSafetyShield(Straight((1.5, 0.0)), CFG)
     person = _person(1, (3.3, 0.0))
