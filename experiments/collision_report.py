@@ -15,8 +15,9 @@ empty when the drone was at rest (0.1 m/s): over the half view, it flew where th
 Where the log's plan records hold the planner's ``threats`` (the default planner's shield), a person
 collision also gets ``planner_knew``: the fraction of plans over the window at which the person's centre
 lay inside a disc the planner kept its plan from, and ``known_for``: for how long before the contact
-(s, at most the window) it had known them without a break (0 when not at the last plan). A person known only a moment
-before was too close to stop for, whatever the planner; one known long before points at the planner.
+(s, at most the window) it had known them without a break (0 when not at the last plan). A person
+known only a moment before was too close to stop for, whatever the planner; one known long before
+points at the planner.
 """
 from __future__ import annotations
 
@@ -62,12 +63,13 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
             fwd = _heading(last)
             row["off_heading"] = round(math.degrees(abs(wrap_angle(math.atan2(v[1], v[0]) - fwd))), 1)
         if c["kind"] == "person" and frames:
-            seen, tracked, moving, speeds = [], [], [], []
+            seen, tracked, moving, speeds, where = [], [], [], [], []
             for f in (f for f in frames if t - window <= f["t"] <= t):
                 person = next((q for q in f["people"] if q["id"] == c["other_id"]), None)
                 if person is None:
                     continue
                 centre = _centre(person)[:2]
+                where.append((f["t"], centre))
                 speeds.append(float(np.hypot(*np.asarray(person["v"], float)[:2])))
                 d = centre - np.asarray(f["p"], float)[:2]
                 bearing = abs(wrap_angle(math.atan2(d[1], d[0]) - _heading(f)))
@@ -86,27 +88,26 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                        reported_moving=round(sum(moving) / n, 2))
             if speeds:
                 row["person_min_speed"] = round(min(speeds), 2)
-            row.update(_planner_knew(plans, frames, c["other_id"], t, window))
+            row.update(_planner_knew(plans, where, t, window))
         rows.append(row)
     return rows
 
 
-def _planner_knew(plans: list[dict], frames: list[dict], person_id, t: float, window: float) -> dict:
-    """planner_knew and known_for of a person collision at t (module docstring); {} without threats."""
+def _planner_knew(plans: list[dict], where: list[tuple[float, np.ndarray]], t: float, window: float) -> dict:
+    """planner_knew and known_for of a person collision at t (module docstring), from the person's centre
+    in the window's frames (``where``: frame time, centre); {} without threats or frames."""
+    if not where:
+        return {}
     known, stamps = [], []
     for p in (p for p in plans if t - window <= p["t"] <= t):
-        f = min(frames, key=lambda r: abs(r["t"] - p["t"]))
-        person = next((q for q in f["people"] if q["id"] == person_id), None)
-        if person is None:
-            continue
-        x, y = _centre(person)[:2]
+        x, y = min(where, key=lambda w: abs(w[0] - p["t"]))[1]
         known.append(any(math.hypot(x - d[0], y - d[1]) <= d[2] for d in p["threats"]))
         stamps.append(p["t"])
     if not known:
         return {}
-    run = next((k for k in range(len(known)) if all(known[k:])), len(known))  # the last unbroken stretch
+    trailing = len(known) - next((k for k in range(len(known) - 1, -1, -1) if not known[k]), -1) - 1
     return {"planner_knew": round(sum(known) / len(known), 2),
-            "known_for": round(t - stamps[run], 2) if run < len(known) else 0.0}
+            "known_for": round(t - stamps[-trailing], 2) if trailing else 0.0}
 
 
 def logs_under(path: Path) -> list[Path]:

@@ -95,7 +95,9 @@ def _threats(planner) -> dict:
     th = getattr(planner, "threats", None)
     if th is None:
         return {}
-    th = np.asarray(th, dtype=float).reshape(-1, 3)
+    th = np.asarray(th, dtype=float)
+    if th.ndim != 2 or th.shape[1] != 3:  # a plug-in's own attribute of that name: not ours to log
+        return {}
     return {"threats": np.round(th[np.all(np.isfinite(th), axis=1)], 2).tolist()}
 
 

@@ -86,7 +86,7 @@ def test_rows_say_how_long_the_planner_knew_the_person():
     assert collision_rows(recs)[0]["planner_knew"] == 0.5
     for r in recs:
         if r["k"] == "plan" and r["t"] >= 1.5:
-            r["threats"] = [[r["t"] * 0.0, -1.0, 0.5]]  # on the person once they are to the right
+            r["threats"] = [[0.0, -1.0, 0.5]]  # on the person once they are to the right
     assert collision_rows(recs)[0]["known_for"] == 1.5  # known from 0.5 s on, without a break
     assert "planner_knew" not in collision_rows(_records())[0]  # a log without threats: nothing said
 
