@@ -40,8 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.ndimage import distance_transform_edt
-
+from planner.distance import distance_to
 from planner.types import ObstaclePrediction
 
 
@@ -386,7 +385,7 @@ def static_clearance(column_occupied: np.ndarray, resolution: float, origin_xy, 
         occ[:, (cy < lo[1]) | (cy > hi[1])] = True
     if not occ.any():
         return np.full(occ.shape, 1e3)
-    return distance_transform_edt(~occ) * resolution - 0.5 * resolution
+    return distance_to(occ) * resolution - 0.5 * resolution
 
 
 class ManeuverSelector:
