@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 from numba import njit
 from scipy.ndimage import distance_transform_edt
@@ -156,23 +157,130 @@ def _astar(blocked, si, sj, gi, gj):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _field(blocked, si, sj):
+    """Path length in cells (flattened (nx, ny); inf where unreachable) from (si, sj) to every cell over the
+    8-connected grid, moves as in _step: Dijkstra with unit-wide buckets (Dial). Every move is at least one
+    cell long, so no cell of a bucket can lower another of the same bucket: each cell's length is the least,
+    over its neighbours, of the neighbour's length plus the move, exactly the values _search gives."""
+    nx, ny = blocked.shape
+    total = nx * ny
+    g = np.full(total, np.inf)
+    done = np.zeros(total, dtype=np.bool_)
+    # three buckets suffice: from bucket b every move lands in b + 1 or b + 2 (moves are 1 or sqrt 2 long)
+    cap = 8 * total + 1
+    buf = np.empty((3, cap), dtype=np.int64)
+    count = np.zeros(3, dtype=np.int64)
+    start = si * ny + sj
+    g[start] = 0.0
+    buf[0, 0] = start
+    count[0] = 1
+    pending = 1
+    sqrt2 = math.sqrt(2.0)
+    b = 0
+    while pending > 0:
+        q = b % 3
+        while count[q] > 0:
+            count[q] -= 1
+            pending -= 1
+            cur = buf[q, count[q]]
+            if done[cur]:
+                continue
+            done[cur] = True
+            ci, cj = cur // ny, cur % ny
+            for di in range(-1, 2):
+                for dj in range(-1, 2):
+                    ni, nj = ci + di, cj + dj
+                    if (di == 0 and dj == 0) or ni < 0 or nj < 0 or ni >= nx or nj >= ny or blocked[ni, nj]:
+                        continue
+                    step = 1.0
+                    if di != 0 and dj != 0:
+                        if blocked[ci + di, cj] or blocked[ci, cj + dj]:
+                            continue
+                        step = sqrt2
+                    nb = ni * ny + nj
+                    if done[nb]:
+                        continue
+                    ng = g[cur] + step
+                    if ng < g[nb]:
+                        g[nb] = ng
+                        r = int(ng) % 3
+                        buf[r, count[r]] = nb
+                        count[r] += 1
+                        pending += 1
+        b += 1
+    return g
+
+
+def _goal_cell(blocked: np.ndarray, origin_xy, resolution: float, goal_xy) -> tuple[int, int] | None:
+    """The cell the cost-to-go is measured from: the goal's (clipped to the grid), or the free cell
+    nearest it; None when there is none near."""
+    nx, ny = blocked.shape
+    ij = np.floor((np.asarray(goal_xy, dtype=float)[:2] - np.asarray(origin_xy, dtype=float)) / resolution).astype(int)
+    return _nearest_free(blocked, int(np.clip(ij[0], 0, nx - 1)), int(np.clip(ij[1], 0, ny - 1)))
+
+
 def cost_to_go(blocked: np.ndarray, origin_xy, resolution: float, goal_xy) -> np.ndarray:
     """(nx, ny) metres still to fly from each cell's centre to the goal on the grid (8-connected, around
     blocked cells). A blocked cell, or one cut off from the goal, gets the value of the nearest reachable
     cell plus twice the distance to it: the field stays finite and falls toward free space, so a drone
     inside the inflation margin is led out of it. All inf only when no cell reaches the goal."""
-    blocked = np.ascontiguousarray(blocked, dtype=np.bool_)
+    return CostToGo().compute(blocked, origin_xy, resolution, goal_xy)[0]
+
+
+class CostToGo:
+    """cost_to_go that keeps its last field and gives it again while it cannot have changed.
+
+    The search from the goal cell reads, for every cell it reaches, only the cells around it (the move's
+    target and, for a diagonal move, the two cells beside it): while the goal cell is the same and no
+    cell whose blocked state changed lies next to (or on) a reached cell, the search runs as before and
+    the field is the same. The fill of the unreached cells depends only on which cells were reached (and
+    the resolution), and is kept on those too."""
+
+    def __init__(self):
+        self._last = None  # (key, blocked, cells next to a reached one, field)
+        self._fill = None  # (resolution, unreached cells, their nearest reached cells' i, j, 2 res distance)
+
+    def __call__(self, blocked: np.ndarray, origin_xy, resolution: float, goal_xy) -> np.ndarray:
+        """The field cost_to_go gives, read-only: it is shared with later calls."""
+        blocked = np.ascontiguousarray(blocked, dtype=np.bool_)
+        key = (blocked.shape, np.asarray(origin_xy, dtype=float).tobytes(), float(resolution),
+               _goal_cell(blocked, origin_xy, resolution, goal_xy))
+        last = self._last
+        if last is not None and key[3] is not None and last[0] == key and (
+                last[1] is blocked or not (last[2] & (last[1] != blocked)).any()):
+            return last[3]
+        field, near = self.compute(blocked, origin_xy, resolution, goal_xy, key[3])
+        field.flags.writeable = False
+        self._last = (key, blocked, near, field)
+        return field
+
+    def compute(self, blocked: np.ndarray, origin_xy, resolution: float, goal_xy, goal_cell=False):
+        """(field, the cells on or next to a reached cell) computed afresh (goal_cell: _goal_cell's answer
+        when known)."""
+        blocked = np.ascontiguousarray(blocked, dtype=np.bool_)
+        nx, ny = blocked.shape
+        g = _goal_cell(blocked, origin_xy, resolution, goal_xy) if goal_cell is False else goal_cell
+        if g is None:
+            return np.full((nx, ny), np.inf), None
+        field = _field(blocked, g[0], g[1]).reshape(nx, ny) * resolution
+        bad = ~np.isfinite(field)
+        if bad.any():
+            f = self._fill
+            if f is None or f[0] != float(resolution) or f[1].shape != bad.shape or not np.array_equal(f[1], bad):
+                dist, (ii, jj) = distance_transform_edt(bad, return_indices=True)
+                f = self._fill = (float(resolution), bad, ii[bad], jj[bad], 2.0 * resolution * dist[bad])
+            field[bad] = field[f[2], f[3]] + f[4]
+        near = cv2.dilate((~bad).view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+        return field, near
+
+
+def _goal_cell(blocked: np.ndarray, origin_xy, resolution: float, goal_xy) -> tuple[int, int] | None:
+    """The cell the cost-to-go is measured from: the goal's (clipped to the grid), or the free cell nearest
+    it; None when there is none near."""
     nx, ny = blocked.shape
     ij = np.floor((np.asarray(goal_xy, dtype=float)[:2] - np.asarray(origin_xy, dtype=float)) / resolution).astype(int)
-    g = _nearest_free(blocked, int(np.clip(ij[0], 0, nx - 1)), int(np.clip(ij[1], 0, ny - 1)))
-    if g is None:
-        return np.full((nx, ny), np.inf)
-    field = _search(blocked, g[0], g[1], -1, -1)[0].reshape(nx, ny) * resolution
-    bad = ~np.isfinite(field)
-    if bad.any():
-        dist, (ii, jj) = distance_transform_edt(bad, return_indices=True)
-        field[bad] = field[ii[bad], jj[bad]] + 2.0 * resolution * dist[bad]
-    return field
+    return _nearest_free(blocked, int(np.clip(ij[0], 0, nx - 1)), int(np.clip(ij[1], 0, ny - 1)))
 
 
 @njit(cache=True)

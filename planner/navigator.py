@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.fallback import brake_and_hold
-from planner.global_path import PathFollower, block_discs, cost_to_go, grid_path
+from planner.global_path import CostToGo, PathFollower, block_discs, grid_path
 from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
 from planner.mpc import MPC, MPCConfig
 from planner.types import PlannerInput, Trajectory
@@ -112,7 +112,8 @@ class MPCPlanner:
     def reset(self) -> None:
         self.mpc.reset()
         self.selector.reset()
-        self._fields = None  # (grid, goal and fence key, column grids, static clearance, cost-to-go)
+        self._fields = None  # (grid and fence key, column grid, static clearance)
+        self._cost_to_go = CostToGo()
         self.last_maneuver = None
         self.follower: PathFollower | None = None
         self._path_stamp = -math.inf
@@ -203,21 +204,19 @@ class MPCPlanner:
         return p_ref, v_ref
 
     def _static_fields(self, inp: PlannerInput):
-        """Static clearance and cost-to-go grids at the flight altitude, recomputed when the column grids
-        they are made from, the goal or the geofence change (most map updates leave the grids as they were)."""
+        """Static clearance and cost-to-go grids at the flight altitude. The clearance is recomputed when its
+        column grid, the grid's placement or the geofence change (most map updates leave it as it was), the
+        cost-to-go when a change can reach it (global_path.CostToGo)."""
         occ, z = inp.occupancy, float(inp.goal[2])
         fence = None if inp.geofence is None or not self.cfg.use_geofence else tuple(np.asarray(g, float) for g in inp.geofence)
         h = self.cfg.maneuvers.band_half_height
         solid = occ.column_blocked(z - h, z + h, inflate=False)
         blocked = occ.column_blocked(z - self.cfg.band_half_height, z + self.cfg.band_half_height, inflate=True)
-        key = (occ.xy_origin.tobytes(), occ.res, np.asarray(inp.goal, float).tobytes(),
-               None if fence is None else tuple(np.r_[fence[0], fence[1]]))
+        key = (occ.xy_origin.tobytes(), occ.res, None if fence is None else tuple(np.r_[fence[0], fence[1]]))
         f = self._fields
-        if f is None or f[0] != key or not (np.array_equal(f[1], solid) and np.array_equal(f[2], blocked)):
-            clear = static_clearance(solid, occ.res, occ.xy_origin, fence)
-            goal = cost_to_go(blocked, occ.xy_origin, occ.res, inp.goal[:2])
-            self._fields = (key, solid, blocked, clear, goal)
-        return self._fields[3], self._fields[4]
+        if f is None or f[0] != key or not np.array_equal(f[1], solid):
+            self._fields = (key, solid, static_clearance(solid, occ.res, occ.xy_origin, fence))
+        return self._fields[2], self._cost_to_go(blocked, occ.xy_origin, occ.res, inp.goal[:2])
 
     def _toward_path_ahead(self, inp: PlannerInput, distance: float) -> np.ndarray:
         """(2,) from the drone to the point ``distance`` metres further along the path than its projection."""

@@ -69,3 +69,30 @@ def test_follower_projection_and_sampling():
     np.testing.assert_allclose(pts, [[0.5, 0.0], [2.0, 1.0], [2.0, 2.0]])
     np.testing.assert_allclose(tang[0], [1.0, 0.0])
     np.testing.assert_allclose(tang[1], [0.0, 1.0])
+
+
+def test_bucketed_field_equals_the_heap_search_bit_for_bit():
+    from planner.global_path import _field, _search
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        nx, ny = rng.integers(1, 50, 2)
+        b = rng.random((nx, ny)) < rng.random() * 0.5
+        si, sj = rng.integers(0, nx), rng.integers(0, ny)
+        b[si, sj] = False
+        assert np.array_equal(_field(b, si, sj), _search(b, si, sj, -1, -1)[0])
+
+
+def test_cost_to_go_cache_gives_the_fresh_field_as_cells_change():
+    from planner.global_path import CostToGo, cost_to_go
+
+    rng = np.random.default_rng(2)
+    b = _grid(40, 20)
+    b[20, 3:] = True  # a wall with a gap at the bottom
+    b[:, 0] = True
+    cached = CostToGo()
+    for _ in range(60):
+        b = b.copy()
+        i, j = rng.integers(0, 40), rng.integers(0, 20)
+        b[i, j] = not b[i, j]
+        np.testing.assert_array_equal(cached(b, (0.0, 0.0), 0.1, (3.5, 1.5)), cost_to_go(b, (0.0, 0.0), 0.1, (3.5, 1.5)))
