@@ -230,6 +230,44 @@ def _any_in_window(L, l_occ, idx, r):
 
 
 @njit(cache=True, nogil=True)
+def _column_bits(L, l_occ):
+    """(nx, ny) uint64: bit k of a column set where L[i, j, k] >= l_occ (nz <= 64)."""
+    nx, ny, nz = L.shape
+    out = np.zeros((nx, ny), np.uint64)
+    for i in range(nx):
+        for j in range(ny):
+            m = np.uint64(0)
+            for k in range(nz):
+                if L[i, j, k] >= l_occ:
+                    m |= np.uint64(1) << np.uint64(k)
+            out[i, j] = m
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _occupied_centres(L, l_occ, a, b, origin, res):
+    """(K, 3) world centres origin + (ijk + 0.5) res of the voxels of L[a0:b0, a1:b1, a2:b2] >= l_occ, in
+    index order (np.argwhere's)."""
+    n = 0
+    for i in range(a[0], b[0]):
+        for j in range(a[1], b[1]):
+            for k in range(a[2], b[2]):
+                if L[i, j, k] >= l_occ:
+                    n += 1
+    out = np.empty((n, 3))
+    n = 0
+    for i in range(a[0], b[0]):
+        for j in range(a[1], b[1]):
+            for k in range(a[2], b[2]):
+                if L[i, j, k] >= l_occ:
+                    out[n, 0] = origin[0] + (i + 0.5) * res
+                    out[n, 1] = origin[1] + (j + 0.5) * res
+                    out[n, 2] = origin[2] + (k + 0.5) * res
+                    n += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _column_any(L, l_occ, k0, k1):
     """(nx, ny) bool: any of L[i, j, k0:k1 + 1] >= l_occ."""
     nx, ny = L.shape[0], L.shape[1]
@@ -271,7 +309,7 @@ class VoxelMap:
         self._touched = np.empty(int(np.prod(box)), np.int64)
         self._history: deque[np.ndarray] = deque(maxlen=cfg.dynamic_history)
         self.version = 0  # grows whenever the map may have changed (reset, update, set_known): for caches
-        self._columns: dict = {}  # column_blocked's results at self._columns_version
+        self._columns: dict = {}  # column_blocked's results (and the columns' bits, "bits") at _columns_version
         self._columns_version = -1
         self.reset()
 
@@ -446,8 +484,8 @@ class VoxelMap:
         a, b = self._centre_range(lo, hi)
         if np.any(b <= a):
             return np.zeros((0, 3))
-        ijk = np.argwhere(self.log_odds[a[0]:b[0], a[1]:b[1], a[2]:b[2]] >= self.l_occ) + a
-        return self.origin + (ijk + 0.5) * self.res
+        return _occupied_centres(self.log_odds, self.l_occ, a.astype(np.int64), b.astype(np.int64), self.origin,
+                                 self.res)
 
     def established_fraction(self, center, size) -> float:
         """Share of the box's footprint columns (voxel columns whose centres lie in the world AABB
@@ -497,11 +535,16 @@ class VoxelMap:
         if col is None:
             if k1 < k0:
                 col = np.zeros(tuple(self.dims[:2]), bool)
+            elif self.dims[2] <= 64:  # every band from one pass: each column's occupied voxels as bits
+                bits = self._columns.get("bits")
+                if bits is None:
+                    bits = self._columns["bits"] = _column_bits(self.log_odds, self.l_occ)
+                col = (bits & np.uint64(((1 << (int(k1) + 1)) - 1) ^ ((1 << int(k0)) - 1))) != 0
             else:
                 col = _column_any(self.log_odds, self.l_occ, k0, k1)
-                if inflate:  # a rectangle of ones: the same cells as a binary dilation with it
-                    kernel = np.ones((2 * int(r[0]) + 1, 2 * int(r[1]) + 1), np.uint8)
-                    col = cv2.dilate(col.view(np.uint8), kernel).view(bool)
+            if inflate and k1 >= k0:  # a rectangle of ones: the same cells as a binary dilation with it
+                kernel = np.ones((2 * int(r[0]) + 1, 2 * int(r[1]) + 1), np.uint8)
+                col = cv2.dilate(col.view(np.uint8), kernel).view(bool)
             col.flags.writeable = False
             self._columns[key] = col
         return col

@@ -381,3 +381,34 @@ def test_dynamic_regions_free_and_hold_voxels_as_the_whole_grid_rule_says(histor
         np.testing.assert_array_equal(m._covered, covered)
         assert not m._protection.any()
     assert np.any(held) and np.any(occupied & (log_odds == m.l_min))  # both rules were exercised
+
+
+@pytest.mark.parametrize("height", [3.0, 6.4, 7.0])
+def test_column_bands_and_occupied_centres_equal_the_direct_computations(height):
+    """Bands from the columns' bits (up to 64 voxels high) or scanned (higher), and the compiled centres,
+    against the plain numpy definitions."""
+    import cv2
+
+    from planner.voxel_map import _column_any
+
+    rng = np.random.default_rng(0)
+    m = VoxelMap(MapConfig(origin=(-1, -1, -0.1), size=(2.0, 1.5, height)))
+    m.set_known(rng.random(m.log_odds.shape) < 0.05)
+    nz = int(m.dims[2])
+    for k0 in range(-1, nz + 1, 3):
+        for k1 in range(k0 - 1, nz + 2, 2):
+            for inflate in (False, True):
+                r = m.inflation if inflate else np.zeros(3, int)
+                a, b = max(k0 - r[2], 0), min(k1 + r[2], nz - 1)
+                want = _column_any(m.log_odds, m.l_occ, a, b) if b >= a else np.zeros(m.log_odds.shape[:2], bool)
+                if inflate and b >= a:
+                    want = cv2.dilate(want.view(np.uint8), np.ones((2 * r[0] + 1, 2 * r[1] + 1), np.uint8)).view(bool)
+                got = m.column_blocked(-0.05 + 0.1 * k0, -0.05 + 0.1 * k1, inflate=inflate)
+                np.testing.assert_array_equal(got, want)
+    for _ in range(30):
+        lo = rng.uniform(-2, 2, 3)
+        hi = lo + rng.uniform(-0.5, 3, 3)
+        a, b = m._centre_range(lo, hi)
+        want = np.zeros((0, 3)) if np.any(b <= a) else \
+            m.origin + (np.argwhere(m.log_odds[a[0]:b[0], a[1]:b[1], a[2]:b[2]] >= m.l_occ) + a + 0.5) * m.res
+        np.testing.assert_array_equal(m.occupied_centers(lo, hi), want)
