@@ -139,21 +139,21 @@ def _greedy_planes(c, pts, d2, p0, side, r, req, n_out, b_out):
     c_k, moved out by req; the points behind that plane are covered."""
     N, M = d2.shape
     Ks = n_out.shape[1]
-    live = np.empty(M, np.int64)  # the points of row k not covered yet, in index order
+    # the points of row k not covered yet, in index order: their coordinates and d2, packed; bi: the
+    # nearest of them (the first of equals), found while packing
+    lx, ly, lz, ld = np.empty(M), np.empty(M), np.empty(M), np.empty(M)
     for k in range(N):
-        n_live = 0
+        n_live, best, bi = 0, math.inf, -1
         for m in range(M):
             if d2[k, m] <= r * r:
-                live[n_live] = m
+                lx[n_live], ly[n_live], lz[n_live], ld[n_live] = pts[m, 0], pts[m, 1], pts[m, 2], d2[k, m]
+                if ld[n_live] < best:
+                    best, bi = ld[n_live], n_live
                 n_live += 1
         for j in range(Ks):
-            if n_live == 0:
+            if n_live == 0 or bi < 0:
                 break  # every point covered
-            best, bi = math.inf, -1
-            for a in range(n_live):
-                if d2[k, live[a]] < best:
-                    best, bi = d2[k, live[a]], live[a]
-            q0, q1, q2 = pts[bi, 0], pts[bi, 1], pts[bi, 2]
+            q0, q1, q2 = lx[bi], ly[bi], lz[bi]
             n0, n1, n2 = c[k, 0] - q0, c[k, 1] - q1, c[k, 2] - q2
             # A linearisation point beyond the voxel, seen from the drone (the previous plan went through
             # a wall on slack), would give a plane keeping the plan beyond the wall: where the straight line
@@ -174,10 +174,11 @@ def _greedy_planes(c, pts, d2, p0, side, r, req, n_out, b_out):
             nq = n0 * q0 + n1 * q1 + n2 * q2
             n_out[k, j, 0], n_out[k, j, 1], n_out[k, j, 2] = n0, n1, n2
             b_out[k, j] = nq + req
-            kept = 0
+            kept, best, bi = 0, math.inf, -1
             for a in range(n_live):  # the points behind the plane through q are covered
-                m = live[a]
-                if n0 * pts[m, 0] + n1 * pts[m, 1] + n2 * pts[m, 2] > nq + 1e-9:
-                    live[kept] = m
+                if n0 * lx[a] + n1 * ly[a] + n2 * lz[a] > nq + 1e-9:
+                    lx[kept], ly[kept], lz[kept], ld[kept] = lx[a], ly[a], lz[a], ld[a]
+                    if ld[kept] < best:
+                        best, bi = ld[kept], kept
                     kept += 1
             n_live = kept
