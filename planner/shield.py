@@ -77,6 +77,7 @@ class PassiveSafetyShield:
     def reset(self) -> None:
         self.planner.reset()
         self._fields = None
+        self._fence = None  # (clearance key, grid shape, cells outside the geofence)
         self._committed: Candidates | None = None  # the last safe commitment, as one motion
         self._committed_t0 = 0.0
         self._tracks: dict[int, tuple[float, float, ObstaclePrediction]] = {}  # id -> first, last stamp, last
@@ -103,15 +104,23 @@ class PassiveSafetyShield:
             return f  # the map changed elsewhere than in this band
         solid = raw
         if inp.geofence is not None:
-            centres = occ.cell_to_world(np.argwhere(np.ones(solid.shape, bool))).reshape(solid.shape + (2,))
-            lo, hi = np.asarray(inp.geofence[0], float), np.asarray(inp.geofence[1], float)
-            solid = solid | ((centres[..., 0] < lo[0]) | (centres[..., 0] > hi[0]) | (centres[..., 1] < lo[1])
-                             | (centres[..., 1] > hi[1]))
+            solid = solid | self._outside(inp, occ, key, raw.shape)
         res = occ.cfg.resolution
         clear = distance_to(solid, res) - 0.5 * res if solid.any() else np.full(solid.shape, 1e3)
         self._fields = {"key": key, "raw": raw, "clear": np.ascontiguousarray(clear), "solid": solid,
                         "origin": occ.xy_origin, "res": res}
         return self._fields
+
+    def _outside(self, inp: PlannerInput, occ, key, shape) -> np.ndarray:
+        """(nx, ny) bool: the cells whose centres lie outside the geofence (kept while key and shape hold)."""
+        if self._fence is not None and self._fence[0] == key and self._fence[1] == shape:
+            return self._fence[2]
+        centres = occ.cell_to_world(np.argwhere(np.ones(shape, bool))).reshape(shape + (2,))
+        lo, hi = np.asarray(inp.geofence[0], float), np.asarray(inp.geofence[1], float)
+        out = ((centres[..., 0] < lo[0]) | (centres[..., 0] > hi[0]) | (centres[..., 1] < lo[1])
+               | (centres[..., 1] > hi[1]))
+        self._fence = (key, shape, out)
+        return out
 
     def _people(self, inp: PlannerInput):
         """Reach discs of the reported and the remembered moving obstacles: C0, Vp (M, 2), R0, G (M,)."""
