@@ -227,17 +227,52 @@ def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
 
 
 @njit(cache=True, nogil=True)
+def _static_terms(P, stop, clear, goal, ox, oy, res, r_robot, m_s, w_hit, w_static, gx, gy, near_goal, r_goal,
+                  m_goal, c, k0, k1, st, g_sum, g_end):
+    """_best's static and goal sums of candidate c over steps k0 <= k < k1 (step K: the stopping point),
+    added to st, g_sum (g_end: the goal field at step K - 1); returns (st, g_sum, g_end)."""
+    K = P.shape[1]
+    nx, ny = clear.shape
+    for k in range(k0, k1):
+        if k < K:
+            x, y = P[c, k, 0], P[c, k, 1]
+        else:
+            x, y = stop[c, 0], stop[c, 1]
+        i = int(math.floor((x - ox) / res))
+        j = int(math.floor((y - oy) / res))
+        i = min(max(i, 0), nx - 1)
+        j = min(max(j, 0), ny - 1)
+        d = clear[i, j]
+        rr, mm = r_robot, m_s
+        if (x - gx) * (x - gx) + (y - gy) * (y - gy) < near_goal * near_goal:
+            rr, mm = r_goal, m_goal
+        if d < rr:
+            st += w_hit
+        if k < K:
+            e = rr + mm - d
+            if e > 0.0:
+                st += w_static * e * e
+            g_sum += goal[i, j]
+            if k == K - 1:
+                g_end = goal[i, j]
+    return st, g_sum, g_end
+
+
+@njit(cache=True, nogil=True)
 def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamma, keep, r_robot, m_s, m_d,
-          w_goal, w_hit, w_static, w_near, worst, w_keep, w_acc, gx, gy, near_goal, r_goal, m_goal, first, parts):
+          w_goal, w_hit, w_static, w_near, worst, w_keep, w_acc, gx, gy, near_goal, r_goal, m_goal, first, group,
+          shared, parts):
     """The candidate of P (C, K, 2) with the least cost J (module docstring), the first of equals: returns
     its index and cost, and writes its terms (goal, static, dynamic, keep, effort) into parts (5,).
     Within near_goal of the goal (gx, gy) the static thresholds are r_goal and m_goal (what the goal
     allows). Branch and bound: candidate ``first`` (-1: none) is costed first; every term is >= 0, so
     a candidate whose terms so far already exceed the least cost found cannot be the least and is left
     (the same choice, bit for bit, as costing every candidate, the weights, priors and gamma being >= 0;
-    a NaN cost counts as infinite). owner (H,): the obstacle of each hypothesis, in ascending order."""
+    a NaN cost counts as infinite). owner (H,): the obstacle of each hypothesis, in ascending order.
+    group, shared: rows a * group to a * group + group - 1 (a < group) start with the same ``shared`` steps
+    (P, A and so stop's prefix as _two_phase writes them): the terms of those steps are summed once per
+    group and each row goes on from there, the same sums in the same order (group 0: none shared)."""
     C, K = P.shape[0], P.shape[1]
-    nx, ny = clear.shape
     H = O.shape[0]
     start = np.zeros(n_obst + 1, np.int64)  # the hypotheses of obstacle o: start[o]:start[o + 1]
     for h in range(H):
@@ -246,6 +281,21 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
         start[owner[h] + 1] = h + 1
     for o in range(n_obst):
         start[o + 1] = max(start[o + 1], start[o])
+    nk = min(keep.shape[0], K)
+    ks = min(max(shared, 0), K) if 0 < group and group * group <= C else 0
+    n_group = group if ks > 0 else 0
+    pre = np.zeros((n_group, 5))  # per group: static, goal sum, goal at the end, keep, effort over ks steps
+    for a in range(n_group):
+        c = a * group
+        pre[a, 0], pre[a, 1], pre[a, 2] = _static_terms(P, stop, clear, goal, ox, oy, res, r_robot, m_s, w_hit,
+                                                        w_static, gx, gy, near_goal, r_goal, m_goal, c, 0, ks,
+                                                        0.0, 0.0, 0.0)
+        for k in range(min(nk, ks)):
+            dx = P[c, k, 0] - keep[k, 0]
+            dy = P[c, k, 1] - keep[k, 1]
+            pre[a, 3] += dx * dx + dy * dy
+        for k in range(ks):
+            pre[a, 4] += A[c, k, 0] * A[c, k, 0] + A[c, k, 1] * A[c, k, 1]
     best_j, best_c = math.inf, -1
     for n in range(C + 1):
         if n == 0:
@@ -256,41 +306,19 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
             c = n - 1
             if c == first:
                 continue
-        g_sum = 0.0
-        g_end = 0.0
-        st = 0.0
-        for k in range(K + 1):
-            if k < K:
-                x, y = P[c, k, 0], P[c, k, 1]
-            else:
-                x, y = stop[c, 0], stop[c, 1]
-            i = int(math.floor((x - ox) / res))
-            j = int(math.floor((y - oy) / res))
-            i = min(max(i, 0), nx - 1)
-            j = min(max(j, 0), ny - 1)
-            d = clear[i, j]
-            rr, mm = r_robot, m_s
-            if (x - gx) * (x - gx) + (y - gy) * (y - gy) < near_goal * near_goal:
-                rr, mm = r_goal, m_goal
-            if d < rr:
-                st += w_hit
-            if k < K:
-                e = rr + mm - d
-                if e > 0.0:
-                    st += w_static * e * e
-                g_sum += goal[i, j]
-                if k == K - 1:
-                    g_end = goal[i, j]
+        k0, st, g_sum, g_end, kp, ef = 0, 0.0, 0.0, 0.0, 0.0, 0.0
+        if c < n_group * group:
+            a = c // group
+            k0, st, g_sum, g_end, kp, ef = ks, pre[a, 0], pre[a, 1], pre[a, 2], pre[a, 3], pre[a, 4]
+        st, g_sum, g_end = _static_terms(P, stop, clear, goal, ox, oy, res, r_robot, m_s, w_hit, w_static, gx, gy,
+                                         near_goal, r_goal, m_goal, c, k0, K + 1, st, g_sum, g_end)
         jg = w_goal * 0.5 * (g_end + g_sum / K)
-        kp = 0.0
-        nk = min(keep.shape[0], K)
-        for k in range(nk):
+        for k in range(min(k0, nk), nk):
             dx = P[c, k, 0] - keep[k, 0]
             dy = P[c, k, 1] - keep[k, 1]
             kp += dx * dx + dy * dy
         kp = w_keep * kp / nk if nk > 0 else 0.0
-        ef = 0.0
-        for k in range(K):
+        for k in range(k0, K):
             ef += A[c, k, 0] * A[c, k, 0] + A[c, k, 1] * A[c, k, 1]
         ef = w_acc * ef / K
         if jg + st + 0.0 + kp + ef > best_j:
@@ -492,7 +520,8 @@ class ManeuverSelector:
                         np.ascontiguousarray(O), R, owner, prior, len(obstacles), G, np.ascontiguousarray(keep),
                         self.r, cfg.static_margin, cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static,
                         cfg.w_near, cfg.worst_case, cfg.w_keep, cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]),
-                        cfg.near_goal, r_goal, m_goal, len(P) - 1 if prev_acc is not None else -1, parts)
+                        cfg.near_goal, r_goal, m_goal, len(P) - 1 if prev_acc is not None else -1,
+                        len(self._grid), self.k_switch, parts)
         names = ["goal", "static", "dynamic", "keep", "effort"]
         pos, vel = np.vstack([p0, P[b]]), np.vstack([v0, V[b]])
         self._prev = (float(t0), pos, A[b].copy())

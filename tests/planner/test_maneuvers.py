@@ -257,13 +257,14 @@ def _random_case(seed):
                 keep=keep, goal_xy=goal_xy, cfg=cfg)
 
 
-def _run_best(k, first):
+def _run_best(k, first, group=0, shared=0):
     from planner.maneuvers import _best
     cfg, parts = k["cfg"], np.empty(5)
     b, cost = _best(k["P"], k["A"], k["stop"], k["clear"], k["goal"], ORIGIN[0], ORIGIN[1], RES, k["O"], k["R"],
                     k["owner"], k["prior"], 3, k["gamma"], k["keep"], R_ROBOT, cfg.static_margin, cfg.dynamic_margin,
                     cfg.w_goal, cfg.w_hit, cfg.w_static, cfg.w_near, cfg.worst_case, cfg.w_keep, cfg.w_acc,
-                    k["goal_xy"][0], k["goal_xy"][1], cfg.near_goal, 0.3, 0.05, first, parts)
+                    k["goal_xy"][0], k["goal_xy"][1], cfg.near_goal, 0.3, 0.05, first, group, shared,
+                    parts)
     return b, cost, parts
 
 
@@ -282,6 +283,22 @@ def test_branch_and_bound_picks_the_least_cost_candidate(seed):
         assert b == int(np.argmin(J))
         assert cost == pytest.approx(J.min(), rel=1e-12)
         np.testing.assert_allclose(parts, ref[b], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_shared_first_steps_give_the_same_choice_bit_for_bit(seed):
+    """Rows of one group sharing their first steps (as _two_phase writes them) are summed from one prefix:
+    the same choice, cost and terms as summing every row from its start."""
+    k = _random_case(seed)
+    T, ks = 17, 10  # 289 of the 300 rows in 17 groups; the rest on their own
+    for a in range(T):
+        for key in ("P", "A"):
+            k[key][a * T + 1:a * T + T, :ks] = k[key][a * T, :ks]
+    for first in (-1, 299, 5):
+        b0, c0, p0 = _run_best(k, first)
+        b1, c1, p1 = _run_best(k, first, T, ks)
+        assert (b0, c0) == (b1, c1)
+        assert np.array_equal(p0, p1)
 
 
 def test_candidates_reuse_their_buffers_without_changing_them():
