@@ -237,9 +237,8 @@ class PassiveSafetyShield:
         n = int(math.ceil(max(tr.duration, c.commit_time) / c.dt))
         P, V = np.empty((1, n + 1, 2)), np.empty((1, n + 1, 2))
         P[0, 0], V[0, 0] = p0[:2], v0[:2]
-        for k in range(1, n + 1):
-            p, v, _ = tr.sample(inp.stamp + k * c.dt)
-            P[0, k], V[0, k] = p[:2], v[:2]
+        p, v, _ = tr.sample_many(inp.stamp + np.arange(1, n + 1) * c.dt)
+        P[0, 1:], V[0, 1:] = p[:, :2], v[:, :2]
         return Candidates(P, V, np.zeros((1, n, 2)), np.zeros((1, 2)), np.zeros(1, np.int64))
 
     def _commit(self, motion: Candidates, stamp: float) -> None:

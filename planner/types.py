@@ -84,6 +84,25 @@ class Trajectory:
         p = self.positions[k] + self.velocities[k] * s + 0.5 * a * s * s
         return p, v, a.copy()
 
+    def sample_many(self, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(positions, velocities, accelerations) (K, 3) at absolute times (K,): ``sample`` at each, the
+        same arithmetic element by element."""
+        t = np.asarray(times, dtype=float)
+        n = len(self.accelerations)
+        if n == 0:
+            return (np.repeat(self.positions[-1:], len(t), axis=0), np.repeat(self.velocities[-1:], len(t), axis=0),
+                    np.zeros((len(t), 3)))
+        tau = t - self.t0
+        end = (tau >= n * self.dt)[:, None]
+        tau = np.where(tau < 0.0, 0.0, tau)  # max(tau, 0.0)
+        k = np.minimum((tau / self.dt).astype(np.int64), n - 1)
+        s = (tau - k * self.dt)[:, None]
+        a = self.accelerations[k]
+        v = self.velocities[k] + a * s
+        p = self.positions[k] + self.velocities[k] * s + 0.5 * a * s * s
+        return (np.where(end, self.positions[-1], p), np.where(end, self.velocities[-1], v),
+                np.where(end, 0.0, a))
+
 
 @dataclass(frozen=True, eq=False)
 class PlannerInput:
