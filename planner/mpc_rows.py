@@ -87,19 +87,36 @@ def slide_clear(cfg: MPCConfig, c, PT, d2, req, side):
     keep = np.any(perp2 < req * req, axis=0)
     along, perp2 = along[:, keep], perp2[:, keep]
     h = np.sqrt(np.maximum(req * req - perp2, 0.0))
-    shift = []
-    for sgn in (1.0, -1.0):
-        lo = np.where(perp2 < req * req, sgn * along - h, np.inf)
-        hi = np.where(perp2 < req * req, sgn * along + h, -np.inf)
-        d = np.zeros(len(c))
-        for _ in range(20):
-            cover = (lo < d[:, None]) & (hi > d[:, None])
-            if not cover.any():
-                break
-            d = np.where(cover.any(axis=1), np.max(np.where(cover, hi, -np.inf), axis=1) + 1e-6, d)
-        shift.append(np.where(cover.any(axis=1), np.inf, d))
+    shift = _shifts(np.ascontiguousarray(along), np.ascontiguousarray(perp2), np.ascontiguousarray(h), req)
     s = np.where(shift[0] <= shift[1], shift[0], -shift[1])
     return c + np.where(np.abs(s) <= cfg.static_radius, s, 0.0)[:, None] * side
+
+
+@njit(cache=True, nogil=True)
+def _shifts(along, perp2, h, req):
+    """slide_clear's shortest free shifts (2, K) along +side (row 0) and -side (row 1): from 0, every point q
+    whose blocked interval (sgn along - h, sgn along + h) (where perp2 < req^2) holds the shift pushes it
+    to the farthest such interval's end plus 1e-6, at most 20 times; inf if still blocked then."""
+    K, M = along.shape
+    out = np.empty((2, K))
+    for r in range(2):
+        sgn = 1.0 if r == 0 else -1.0
+        for k in range(K):
+            d = 0.0
+            blocked = False
+            for _ in range(20):
+                blocked = False
+                top = -math.inf
+                for m in range(M):
+                    if perp2[k, m] < req * req:
+                        if sgn * along[k, m] - h[k, m] < d and sgn * along[k, m] + h[k, m] > d:
+                            blocked = True
+                            top = max(top, sgn * along[k, m] + h[k, m])
+                if not blocked:
+                    break
+                d = top + 1e-6
+            out[r, k] = math.inf if blocked else d
+    return out
 
 
 def static_rows(cfg: MPCConfig, c, pts, side, p0):

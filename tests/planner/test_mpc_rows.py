@@ -54,3 +54,32 @@ def test_static_rows_are_the_greedy_separating_planes(seed):
     np.testing.assert_allclose(n, n_ref, atol=1e-12)
     np.testing.assert_allclose(b, b_ref, atol=1e-12)
     assert np.isfinite(b).sum() > 0
+
+
+def _shifts_by_arrays(along, perp2, h, req):
+    """slide_clear's shifts as whole-array steps (all rows at once, stopping when none is blocked)."""
+    out = []
+    for sgn in (1.0, -1.0):
+        lo = np.where(perp2 < req * req, sgn * along - h, np.inf)
+        hi = np.where(perp2 < req * req, sgn * along + h, -np.inf)
+        d = np.zeros(len(along))
+        for _ in range(20):
+            cover = (lo < d[:, None]) & (hi > d[:, None])
+            if not cover.any():
+                break
+            d = np.where(cover.any(axis=1), np.max(np.where(cover, hi, -np.inf), axis=1) + 1e-6, d)
+        out.append(np.where(cover.any(axis=1), np.inf, d))
+    return np.array(out)
+
+
+def test_compiled_shifts_equal_the_array_steps_bit_for_bit():
+    from planner.mpc_rows import _shifts
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        K, M = rng.integers(1, 6), rng.integers(1, 300)
+        along = rng.normal(0.0, rng.choice([0.3, 1.0, 3.0]), (K, M))
+        perp2 = rng.random((K, M)) * rng.choice([0.1, 1.0, 4.0])
+        req = float(rng.choice([0.2, 0.5, 1.5]))
+        h = np.sqrt(np.maximum(req * req - perp2, 0.0))
+        np.testing.assert_array_equal(_shifts(along, perp2, h, req), _shifts_by_arrays(along, perp2, h, req))
