@@ -83,3 +83,14 @@ def test_compiled_shifts_equal_the_array_steps_bit_for_bit():
         req = float(rng.choice([0.2, 0.5, 1.5]))
         h = np.sqrt(np.maximum(req * req - perp2, 0.0))
         np.testing.assert_array_equal(_shifts(along, perp2, h, req), _shifts_by_arrays(along, perp2, h, req))
+
+
+def test_compiled_shifts_give_inf_where_twenty_steps_do_not_clear():
+    from planner.mpc_rows import _shifts
+
+    along = np.array([0.9 * np.arange(-30, 31)])  # a chain of overlapping intervals both ways
+    perp2 = np.zeros_like(along)
+    h = np.full_like(along, 0.5)
+    got = _shifts(along, perp2, h, 0.5)
+    assert np.all(np.isinf(got))
+    np.testing.assert_array_equal(got, _shifts_by_arrays(along, perp2, h, 0.5))
