@@ -52,7 +52,7 @@ from planner.fallback import brake_and_hold
 from planner.homotopy import side_combinations
 from planner.mpc_config import MPCConfig
 from planner.mpc_qp import QPLayout, rollout
-from planner.mpc_rows import dynamic_candidates, dynamic_rows, static_rows
+from planner.mpc_rows import dynamic_candidates, dynamic_rows, finite_rows, static_rows
 from planner.types import Trajectory
 
 __all__ = ["MPC", "MPCConfig", "MPCResult"]
@@ -264,7 +264,7 @@ class MPC:
                                              (ob.center, ob.size, ob.velocity, ob.acceleration, ob.position_std))]
         ignored = len(obstacles) - len(obs)
         pts = np.zeros((0, 3)) if static_points is None else np.asarray(static_points, dtype=float).reshape(-1, 3)
-        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        pts = finite_rows(pts)
         c, zw, yw = self._start(t0, p0, p_ref)
         guided = guide is not None and np.all(np.isfinite(np.asarray(guide, dtype=float)))
         if guided:

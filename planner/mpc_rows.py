@@ -119,13 +119,52 @@ def _shifts(along, perp2, h, req):
     return out
 
 
+@njit(cache=True, nogil=True)
+def finite_rows(pts):
+    """The rows of pts (M, 3) whose three values are all finite, in order."""
+    M = pts.shape[0]
+    keep = np.zeros(M, np.bool_)
+    n = 0
+    for m in range(M):
+        if np.isfinite(pts[m, 0]) and np.isfinite(pts[m, 1]) and np.isfinite(pts[m, 2]):
+            keep[m] = True
+            n += 1
+    out = np.empty((n, 3))
+    n = 0
+    for m in range(M):
+        if keep[m]:
+            out[n, 0], out[n, 1], out[n, 2] = pts[m, 0], pts[m, 1], pts[m, 2]
+            n += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _inside(pts, lo, hi):
+    """The rows of pts (M, 3) within the box lo <= p <= hi (3,) each, in order."""
+    M = pts.shape[0]
+    keep = np.zeros(M, np.bool_)
+    n = 0
+    for m in range(M):
+        if (pts[m, 0] >= lo[0] and pts[m, 1] >= lo[1] and pts[m, 2] >= lo[2] and pts[m, 0] <= hi[0]
+                and pts[m, 1] <= hi[1] and pts[m, 2] <= hi[2]):
+            keep[m] = True
+            n += 1
+    out = np.empty((n, 3))
+    n = 0
+    for m in range(M):
+        if keep[m]:
+            out[n, 0], out[n, 1], out[n, 2] = pts[m, 0], pts[m, 1], pts[m, 2]
+            n += 1
+    return out
+
+
 def static_rows(cfg: MPCConfig, c, pts, side, p0):
     """(5): greedy separating planes, normals (N, Ks, 3) (zeros where unused) and rhs (N, Ks) (_greedy_planes).
     The distances are matrix products against the contiguous (3, M) transpose."""
     N, Ks = cfg.horizon, cfg.static_per_step
     n_out, b_out = np.zeros((N, Ks, 3)), np.full((N, Ks), -np.inf)
     r, req = cfg.static_radius, cfg.robot_radius + cfg.voxel_size / 2 + cfg.static_margin
-    pts = pts[np.all((pts >= c.min(axis=0) - r) & (pts <= c.max(axis=0) + r), axis=1)]
+    pts = _inside(np.asarray(pts, dtype=float), c.min(axis=0) - r, c.max(axis=0) + r)
     if len(pts) == 0:
         return n_out, b_out
     PT = np.ascontiguousarray(pts.T)

@@ -94,3 +94,18 @@ def test_compiled_shifts_give_inf_where_twenty_steps_do_not_clear():
     got = _shifts(along, perp2, h, 0.5)
     assert np.all(np.isinf(got))
     np.testing.assert_array_equal(got, _shifts_by_arrays(along, perp2, h, 0.5))
+
+
+def test_compiled_row_filters_equal_the_boolean_masks():
+    from planner.mpc_rows import _inside, finite_rows
+
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        p = rng.normal(size=(int(rng.integers(0, 100)), 3)) * 3
+        if len(p):
+            i = rng.integers(0, len(p), len(p) // 4)
+            p[i, rng.integers(0, 3, len(i))] = rng.choice([np.nan, np.inf, -np.inf], len(i))
+        q = finite_rows(p)
+        np.testing.assert_array_equal(q, p[np.all(np.isfinite(p), axis=1)])
+        lo, hi = rng.normal(size=3) - 1, rng.normal(size=3) + 1
+        np.testing.assert_array_equal(_inside(q, lo, hi), q[np.all((q >= lo) & (q <= hi), axis=1)])
