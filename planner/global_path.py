@@ -296,6 +296,24 @@ def _line_free(blocked, i0, j0, i1, j1):
     return True
 
 
+@njit(cache=True)
+def _shortcut(blocked, ij):
+    """Indices into the path's cells ij (K, 2) kept by greedy line-of-sight shortcutting: from each kept
+    cell, the farthest later cell the straight line reaches free (the next cell if none)."""
+    K = ij.shape[0]
+    keep = np.empty(K, np.int64)
+    keep[0] = 0
+    n = 1
+    while keep[n - 1] < K - 1:
+        a = keep[n - 1]
+        b = K - 1
+        while b > a + 1 and not _line_free(blocked, ij[a, 0], ij[a, 1], ij[b, 0], ij[b, 1]):
+            b -= 1
+        keep[n] = b
+        n += 1
+    return keep[:n]
+
+
 def _nearest_free(blocked: np.ndarray, i: int, j: int, max_radius: int = 15) -> tuple[int, int] | None:
     if not blocked[i, j]:
         return i, j
@@ -335,14 +353,7 @@ def grid_path(blocked: np.ndarray, origin_xy, resolution: float, start_xy, goal_
     if len(cells) == 0:
         return None
     ij = np.stack([cells // ny, cells % ny], axis=1)
-    keep = [0]  # greedy line-of-sight shortcutting
-    while keep[-1] < len(ij) - 1:
-        a = keep[-1]
-        b = len(ij) - 1
-        while b > a + 1 and not _line_free(blocked, ij[a, 0], ij[a, 1], ij[b, 0], ij[b, 1]):
-            b -= 1
-        keep.append(b)
-    pts = o + (ij[keep] + 0.5) * resolution
+    pts = o + (ij[_shortcut(blocked, ij)] + 0.5) * resolution
     pts[0] = np.asarray(start_xy, dtype=float)[:2]
     if g == cell(goal_xy):
         pts[-1] = np.asarray(goal_xy, dtype=float)[:2]
