@@ -189,6 +189,9 @@ def _approach(p0, v0, q, N, dt, amax, vcap, adec):
     return P, V, A
 
 
+_TURNS = np.radians([45, -45, 90, -90, 135, -135, 180])  # a walking obstacle's turns (hypotheses)
+
+
 def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
     """Futures of one moving obstacle: centres (H, K, 2) at ``times`` and prior weights (H,)."""
     t = np.asarray(times, dtype=float)
@@ -208,18 +211,20 @@ def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
         heads = np.arange(8) * (math.pi / 4)
         w = cfg.p_turn / 8
         sp = np.minimum(speed + cfg.start_accel * t, lo)
+        walked = np.cumsum(sp * dt)[:, None]  # the same distance along every heading
         for h in heads:
             d = np.array([math.cos(h), math.sin(h)])
-            paths.append(c + np.cumsum(sp * dt)[:, None] * d)
+            paths.append(c + walked * d)
             weights.append(w)
     else:
         th0 = math.atan2(v[1], v[0])
         s = float(np.clip(speed, lo, hi))
         rate = cfg.turn_rate * min(1.0, 1.0 / s) if s > 0 else cfg.turn_rate
         w = cfg.p_turn / 7
-        for dh in np.radians([45, -45, 90, -90, 135, -135, 180]):
-            th = th0 + np.sign(dh) * np.minimum(rate * t, abs(dh))
-            sp = s * np.where(rate * t < abs(dh), max(math.cos(abs(dh) / 2), 0.3), 1.0)  # slower while turning
+        turned = rate * t
+        for dh in _TURNS:
+            th = th0 + np.sign(dh) * np.minimum(turned, abs(dh))
+            sp = s * np.where(turned < abs(dh), max(math.cos(abs(dh) / 2), 0.3), 1.0)  # slower while turning
             step = np.stack([np.cos(th), np.sin(th)], axis=1) * (sp * dt)[:, None]
             paths.append(c + np.cumsum(step, axis=0))
             weights.append(w)
