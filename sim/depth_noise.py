@@ -35,33 +35,56 @@ def _edge_pixels(z, threshold, idx):
     neighbourhood (clipped to the image) spans a depth jump above ``threshold`` times their depth; return
     how many. The jump is the neighbourhood's maximum minus its minimum over valid pixels: invalid ones
     (z <= 0) count 1e4 m farther for the minimum and as they are for the maximum. The sign of
-    max - min - threshold z is taken exactly (float64 holds the float32 product exactly)."""
+    max - min - threshold z is taken exactly (float64 holds the float32 product exactly).
+
+    Row by row: the extremes over the three rows per column, then over three columns (the interior
+    without clamping, so that both loops vectorise), then the row's edge flags, gathered eight at a time
+    (edges are few: a zero word of eight flags is skipped at once)."""
     H, W = z.shape
     lo_c = np.empty(W, np.float32)  # per column, over rows v-1..v+1 (clipped: a border row counts twice)
     hi_c = np.empty(W, np.float32)
-    edge = np.empty(W, np.bool_)
+    lo_r = np.empty(W, np.float32)  # ... then over columns u-1..u+1
+    hi_r = np.empty(W, np.float32)
+    nw = W // 8
+    edge = np.zeros(8 * (nw + 1), np.uint8)
+    words = edge[:8 * nw].view(np.uint64)
     t = np.float64(-threshold)
     n = 0
     for v in range(H):
-        ra, rb = max(v - 1, 0), min(v + 1, H - 1)
+        za, zb, zc = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
         for u in range(W):  # branch-free selects, so that the loop vectorises
-            a, b, c = z[ra, u], z[v, u], z[rb, u]
+            a, b, c = za[u], zb[u], zc[u]
             fa, fb, fc = _for_minimum(a), _for_minimum(b), _for_minimum(c)
             lo = fa if fa < fb else fb
             lo_c[u] = lo if lo < fc else fc
             hi = a if a > b else b
             hi_c[u] = hi if hi > c else c
-        for u in range(W):
+        for u in range(1, W - 1):
+            l0, l1, l2 = lo_c[u - 1], lo_c[u], lo_c[u + 1]
+            lo = l0 if l0 < l1 else l1
+            lo_r[u] = lo if lo < l2 else l2
+            h0, h1, h2 = hi_c[u - 1], hi_c[u], hi_c[u + 1]
+            hi = h0 if h0 > h1 else h1
+            hi_r[u] = hi if hi > h2 else h2
+        for u in (0, W - 1):
             ua, ub = max(u - 1, 0), min(u + 1, W - 1)
             lo = lo_c[ua] if lo_c[ua] < lo_c[u] else lo_c[u]
-            lo = lo if lo < lo_c[ub] else lo_c[ub]
+            lo_r[u] = lo if lo < lo_c[ub] else lo_c[ub]
             hi = hi_c[ua] if hi_c[ua] > hi_c[u] else hi_c[u]
-            hi = hi if hi > hi_c[ub] else hi_c[ub]
-            d = z[v, u]
-            edge[u] = (d > 0) & (np.float64(d) * t + np.float64(hi - lo) > 0.0)
+            hi_r[u] = hi if hi > hi_c[ub] else hi_c[ub]
         for u in range(W):
+            d = zb[u]
+            edge[u] = (d > 0) & (np.float64(d) * t + np.float64(hi_r[u] - lo_r[u]) > 0.0)
+        base = v * W
+        for w in range(nw):
+            if words[w] != 0:
+                for u in range(8 * w, 8 * w + 8):
+                    if edge[u]:
+                        idx[n] = base + u
+                        n += 1
+        for u in range(8 * nw, W):
             if edge[u]:
-                idx[n] = v * W + u
+                idx[n] = base + u
                 n += 1
     return n
 

@@ -105,21 +105,24 @@ def test_range_limits_and_millimetre_quantisation():
 def _rough_image(seed, shape=(48, 64)):
     """Patches of random depths with invalid pixels, rows and columns of them at the borders too."""
     rng = np.random.default_rng(seed)
-    z = np.repeat(np.repeat(rng.uniform(0.3, 8.0, (shape[0] // 4, shape[1] // 4)), 4, 0), 4, 1).astype(np.float32)
+    patches = rng.uniform(0.3, 8.0, (-(-shape[0] // 4), -(-shape[1] // 4)))
+    z = np.repeat(np.repeat(patches, 4, 0), 4, 1)[:shape[0], :shape[1]].astype(np.float32)
     z += rng.normal(0, 0.02, shape).astype(np.float32)
     z[rng.random(shape) < 0.05] = 0.0
-    z[:, 0] = 0.0
-    z[-1, :] = 0.0
+    if min(shape) > 3:  # invalid border lines (a thinner image keeps its pixels, to have edges)
+        z[:, 0] = 0.0
+        z[-1, :] = 0.0
     return z
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_edge_pixels_are_the_valid_pixels_whose_neighbourhood_jumps(seed):
+@pytest.mark.parametrize("seed, shape", [(s, (48, 64)) for s in range(5)]
+                         + [(5, (13, 21)), (6, (3, 9)), (7, (1, 17)), (8, (9, 1)), (9, (2, 2))])
+def test_edge_pixels_are_the_valid_pixels_whose_neighbourhood_jumps(seed, shape):
     from scipy.ndimage import maximum_filter, minimum_filter
 
     from sim.depth_noise import _edge_pixels, _extremes_at
 
-    z = _rough_image(seed)
+    z = _rough_image(seed, shape)
     far = np.where(z <= 0, z + np.float32(1e4), z)
     lo = minimum_filter(far, size=3, mode="nearest")  # the neighbourhood clipped to the image
     hi = maximum_filter(z, size=3, mode="nearest")
