@@ -120,6 +120,18 @@ def _shifts(along, perp2, h, req):
 
 
 @njit(cache=True, nogil=True)
+def _kept_rows(pts, keep, n):
+    """The n rows of pts (M, 3) where keep (M,) is True, in order."""
+    out = np.empty((n, 3))
+    j = 0
+    for m in range(pts.shape[0]):
+        if keep[m]:
+            out[j, 0], out[j, 1], out[j, 2] = pts[m, 0], pts[m, 1], pts[m, 2]
+            j += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
 def finite_rows(pts):
     """The rows of pts (M, 3) whose three values are all finite, in order."""
     M = pts.shape[0]
@@ -129,13 +141,7 @@ def finite_rows(pts):
         if np.isfinite(pts[m, 0]) and np.isfinite(pts[m, 1]) and np.isfinite(pts[m, 2]):
             keep[m] = True
             n += 1
-    out = np.empty((n, 3))
-    n = 0
-    for m in range(M):
-        if keep[m]:
-            out[n, 0], out[n, 1], out[n, 2] = pts[m, 0], pts[m, 1], pts[m, 2]
-            n += 1
-    return out
+    return _kept_rows(pts, keep, n)
 
 
 @njit(cache=True, nogil=True)
@@ -149,13 +155,7 @@ def _inside(pts, lo, hi):
                 and pts[m, 1] <= hi[1] and pts[m, 2] <= hi[2]):
             keep[m] = True
             n += 1
-    out = np.empty((n, 3))
-    n = 0
-    for m in range(M):
-        if keep[m]:
-            out[n, 0], out[n, 1], out[n, 2] = pts[m, 0], pts[m, 1], pts[m, 2]
-            n += 1
-    return out
+    return _kept_rows(pts, keep, n)
 
 
 def static_rows(cfg: MPCConfig, c, pts, side, p0):
