@@ -212,14 +212,6 @@ def _field(blocked, si, sj):
     return g
 
 
-def _goal_cell(blocked: np.ndarray, origin_xy, resolution: float, goal_xy) -> tuple[int, int] | None:
-    """The cell the cost-to-go is measured from: the goal's (clipped to the grid), or the free cell
-    nearest it; None when there is none near."""
-    nx, ny = blocked.shape
-    ij = np.floor((np.asarray(goal_xy, dtype=float)[:2] - np.asarray(origin_xy, dtype=float)) / resolution).astype(int)
-    return _nearest_free(blocked, int(np.clip(ij[0], 0, nx - 1)), int(np.clip(ij[1], 0, ny - 1)))
-
-
 def cost_to_go(blocked: np.ndarray, origin_xy, resolution: float, goal_xy) -> np.ndarray:
     """(nx, ny) metres still to fly from each cell's centre to the goal on the grid (8-connected, around
     blocked cells). A blocked cell, or one cut off from the goal, gets the value of the nearest reachable
