@@ -127,45 +127,42 @@ class Maneuver:
     candidates: int
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _track(P, V, A, c, k0, k1, px, vx, py, vy, tx, ty, dt, amax):
+    """Steps k0 <= k < k1 of row c of P, V, A from (px, vx, py, vy): every step the acceleration that reaches
+    the target velocity (tx, ty), clipped to +-amax per axis, both axes in one loop so that the row is
+    written in memory order. Returns the state after the last step."""
+    for k in range(k0, k1):
+        ax = min(max((tx - vx) / dt, -amax), amax)
+        px += vx * dt + 0.5 * ax * dt * dt
+        vx += ax * dt
+        ay = min(max((ty - vy) / dt, -amax), amax)
+        py += vy * dt + 0.5 * ay * dt * dt
+        vy += ay * dt
+        P[c, k, 0], V[c, k, 0], A[c, k, 0] = px, vx, ax
+        P[c, k, 1], V[c, k, 1], A[c, k, 1] = py, vy, ay
+    return px, vx, py, vy
+
+
 @njit(cache=True, nogil=True)
 def _two_phase(P, V, A, p0, v0, targets, ks, dt, amax):
     """Fills rows a * T + b of P, V, A (C, N, 2) (positions, velocities, accelerations) with every pair of
     targets (a held for ks steps, then b), each reached by bang-bang velocity tracking: every step the
     acceleration that reaches the target velocity, clipped to +-amax per axis. The first phase, the same
-    for every b, is computed once per a. Rows from T * T on are left to the caller. (The axes are
-    independent; both are stepped in one loop so that each row is written in memory order.)"""
+    for every b, is computed once per a. Rows from T * T on are left to the caller."""
     T, N = targets.shape[0], P.shape[1]
     k1 = max(min(ks, N), 0)
     for a in range(T):
         c0 = a * T
-        px, vx, py, vy = p0[0], v0[0], p0[1], v0[1]
-        tx, ty = targets[a, 0], targets[a, 1]
-        for k in range(k1):
-            ax = min(max((tx - vx) / dt, -amax), amax)
-            px += vx * dt + 0.5 * ax * dt * dt
-            vx += ax * dt
-            ay = min(max((ty - vy) / dt, -amax), amax)
-            py += vy * dt + 0.5 * ay * dt * dt
-            vy += ay * dt
-            P[c0, k, 0], V[c0, k, 0], A[c0, k, 0] = px, vx, ax
-            P[c0, k, 1], V[c0, k, 1], A[c0, k, 1] = py, vy, ay
+        px, vx, py, vy = _track(P, V, A, c0, 0, k1, p0[0], v0[0], p0[1], v0[1], targets[a, 0], targets[a, 1], dt,
+                                amax)
         for b in range(T):
             c = c0 + b
             if b > 0:
                 for k in range(k1):
                     P[c, k, 0], V[c, k, 0], A[c, k, 0] = P[c0, k, 0], V[c0, k, 0], A[c0, k, 0]
                     P[c, k, 1], V[c, k, 1], A[c, k, 1] = P[c0, k, 1], V[c0, k, 1], A[c0, k, 1]
-            pbx, vbx, pby, vby = px, vx, py, vy
-            tx, ty = targets[b, 0], targets[b, 1]
-            for k in range(k1, N):
-                ax = min(max((tx - vbx) / dt, -amax), amax)
-                pbx += vbx * dt + 0.5 * ax * dt * dt
-                vbx += ax * dt
-                ay = min(max((ty - vby) / dt, -amax), amax)
-                pby += vby * dt + 0.5 * ay * dt * dt
-                vby += ay * dt
-                P[c, k, 0], V[c, k, 0], A[c, k, 0] = pbx, vbx, ax
-                P[c, k, 1], V[c, k, 1], A[c, k, 1] = pby, vby, ay
+            _track(P, V, A, c, k1, N, px, vx, py, vy, targets[b, 0], targets[b, 1], dt, amax)
 
 
 @njit(cache=True, nogil=True)
