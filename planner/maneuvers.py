@@ -187,45 +187,58 @@ def _approach(p0, v0, q, N, dt, amax, vcap, adec):
 
 
 _TURNS = np.radians([45, -45, 90, -90, 135, -135, 180])  # a walking obstacle's turns (hypotheses)
+_TURN_SIZE = np.abs(_TURNS)[:, None]  # (7, 1)
+_TURN_SIGN = np.sign(_TURNS)[:, None]
+_TURN_PACE = np.array([max(math.cos(a / 2), 0.3) for a in np.abs(_TURNS)])[:, None]  # speed factor while turning
+_START_HEADINGS = np.array([[math.cos(h), math.sin(h)] for h in np.arange(8) * (math.pi / 4)])  # (8, 2)
 
 
 def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
     """Futures of one moving obstacle: centres (H, K, 2) at ``times`` and prior weights (H,)."""
     t = np.asarray(times, dtype=float)
     c, v = np.asarray(ob.center, float)[:2], np.asarray(ob.velocity, float)[:2]
-    keep = ob.predict(t)[:, :2]
     speed = float(np.hypot(*v))
     dt = np.diff(np.r_[0.0, t])
-    paths, weights = [keep], [cfg.p_keep]
+    lo, hi = cfg.walk_speed
+    standing = speed < cfg.standing
+    n_turns = len(_START_HEADINGS) if standing else len(_TURNS)
+    paths = np.empty((2 + n_turns, len(t), 2))
+    paths[0] = ob.predict(t)[:, :2]
     # stopping: decelerate along the current velocity
     ts = speed / cfg.stop_decel  # standing from then on
     s_stop = np.where(t < ts, speed * t - 0.5 * cfg.stop_decel * t * t, speed * ts - 0.5 * cfg.stop_decel * ts * ts)
     u = v / speed if speed > 1e-6 else np.zeros(2)
-    paths.append(c + s_stop[:, None] * u)
-    weights.append(cfg.p_stop)
-    lo, hi = cfg.walk_speed
-    if speed < cfg.standing:  # no heading: start walking in 8 directions
-        heads = np.arange(8) * (math.pi / 4)
-        w = cfg.p_turn / 8
+    paths[1] = c + s_stop[:, None] * u
+    if standing:  # no heading: start walking in 8 directions
         sp = np.minimum(speed + cfg.start_accel * t, lo)
         walked = np.cumsum(sp * dt)[:, None]  # the same distance along every heading
-        for h in heads:
-            d = np.array([math.cos(h), math.sin(h)])
-            paths.append(c + walked * d)
-            weights.append(w)
+        paths[2:] = c + walked[None] * _START_HEADINGS[:, None, :]
     else:
         th0 = math.atan2(v[1], v[0])
         s = float(np.clip(speed, lo, hi))
         rate = cfg.turn_rate * min(1.0, 1.0 / s) if s > 0 else cfg.turn_rate
-        w = cfg.p_turn / 7
         turned = rate * t
-        for dh in _TURNS:
-            th = th0 + np.sign(dh) * np.minimum(turned, abs(dh))
-            sp = s * np.where(turned < abs(dh), max(math.cos(abs(dh) / 2), 0.3), 1.0)  # slower while turning
-            step = np.stack([np.cos(th), np.sin(th)], axis=1) * (sp * dt)[:, None]
-            paths.append(c + np.cumsum(step, axis=0))
-            weights.append(w)
-    return np.stack(paths), np.asarray(weights, dtype=float)
+        th = th0 + _TURN_SIGN * np.minimum(turned, _TURN_SIZE)  # (7, K), one row per turn
+        ds = (s * np.where(turned < _TURN_SIZE, _TURN_PACE, 1.0)) * dt  # slower while turning
+        paths[2:, :, 0] = c[0] + np.cumsum(np.cos(th) * ds, axis=1)
+        paths[2:, :, 1] = c[1] + np.cumsum(np.sin(th) * ds, axis=1)
+    w = np.full(2 + n_turns, cfg.p_turn / n_turns)
+    w[0], w[1] = cfg.p_keep, cfg.p_stop
+    return paths, w
+
+
+@njit(cache=True, nogil=True)
+def _stopping_points(P, V, decel2):
+    """(C, 2): where each candidate of P, V (C, K, 2) comes to rest braking from its last state
+    (decel2: twice the braking deceleration)."""
+    C, K = P.shape[0], P.shape[1]
+    out = np.empty((C, 2))
+    for c in range(C):
+        vx, vy = V[c, K - 1, 0], V[c, K - 1, 1]
+        f = math.sqrt(vx * vx + vy * vy) / decel2
+        out[c, 0] = P[c, K - 1, 0] + vx * f
+        out[c, 1] = P[c, K - 1, 1] + vy * f
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -498,8 +511,7 @@ class ManeuverSelector:
         if q is not None and np.hypot(*(q - p0)) > cfg.approach_range:
             q = None
         P, V, A = self.candidates(p0, v0, guide_dir, prev_acc, q, out=self._buffers)
-        sp = np.linalg.norm(V[:, -1], axis=1)
-        stop = P[:, -1] + V[:, -1] * (sp / (2 * cfg.brake))[:, None]
+        stop = _stopping_points(P, V, 2 * cfg.brake)
         O, R, G, owner, prior = [], [], [], [], []
         for j, ob in enumerate(obstacles):
             paths, w = hypotheses(ob, self.t, cfg)
