@@ -311,6 +311,13 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
             pre[a, 3] += dx * dx + dy * dy
         for k in range(ks):
             pre[a, 4] += A[c, k, 0] * A[c, k, 0] + A[c, k, 1] * A[c, k, 1]
+    # squared distances beyond which a hypothesis adds nothing (e >= m_d), a little beyond R + m_d so that
+    # rounding cannot skip a term the sum would count; -1 where R + m_d <= 0 (never within reach)
+    far = np.empty((H, K))
+    for h in range(H):
+        for k in range(K):
+            lim = R[h, k] + m_d
+            far[h, k] = (lim * (1.0 + 1e-9)) ** 2 if lim > 0.0 else -1.0
     best_j, best_c = math.inf, -1
     for n in range(C + 1):
         if n == 0:
@@ -347,7 +354,10 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
                 for k in range(K):
                     dx = P[c, k, 0] - O[h, k, 0]
                     dy = P[c, k, 1] - O[h, k, 1]
-                    e = math.sqrt(dx * dx + dy * dy) - R[h, k]
+                    d2 = dx * dx + dy * dy
+                    if d2 > far[h, k]:
+                        continue  # farther than R + m_d: no term
+                    e = math.sqrt(d2) - R[h, k]
                     if e < m_d:
                         v = w_near * (m_d - e) * (m_d - e)
                         if e < 0.0:
