@@ -128,10 +128,10 @@ class Maneuver:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _track(P, V, A, c, k0, k1, px, vx, py, vy, tx, ty, dt, amax):
+def _track(P, V, A, c, k0, k1, px, vx, py, vy, tx, ty, dt, amax, k_v):
     """Steps k0 <= k < k1 of row c of P, V, A from (px, vx, py, vy): every step the acceleration that reaches
     the target velocity (tx, ty), clipped to +-amax per axis, both axes in one loop so that the row is
-    written in memory order. Returns the state after the last step."""
+    written in memory order (V from step k_v on only). Returns the state after the last step."""
     for k in range(k0, k1):
         ax = min(max((tx - vx) / dt, -amax), amax)
         px += vx * dt + 0.5 * ax * dt * dt
@@ -139,30 +139,52 @@ def _track(P, V, A, c, k0, k1, px, vx, py, vy, tx, ty, dt, amax):
         ay = min(max((ty - vy) / dt, -amax), amax)
         py += vy * dt + 0.5 * ay * dt * dt
         vy += ay * dt
-        P[c, k, 0], V[c, k, 0], A[c, k, 0] = px, vx, ax
-        P[c, k, 1], V[c, k, 1], A[c, k, 1] = py, vy, ay
+        P[c, k, 0], A[c, k, 0] = px, ax
+        P[c, k, 1], A[c, k, 1] = py, ay
+        if k >= k_v:
+            V[c, k, 0], V[c, k, 1] = vx, vy
     return px, vx, py, vy
 
 
 @njit(cache=True, nogil=True)
-def _two_phase(P, V, A, p0, v0, targets, ks, dt, amax):
+def _two_phase(P, V, A, p0, v0, targets, ks, dt, amax, full):
     """Fills rows a * T + b of P, V, A (C, N, 2) (positions, velocities, accelerations) with every pair of
     targets (a held for ks steps, then b), each reached by bang-bang velocity tracking: every step the
     acceleration that reaches the target velocity, clipped to +-amax per axis. The first phase, the same
-    for every b, is computed once per a. Rows from T * T on are left to the caller."""
+    for every b, is computed once per a. Rows from T * T on are left to the caller.
+    Not ``full``: only what _best and the stopping points read is written: the first phase in row a * T
+    alone (the other rows of the group from step ks on, and their last step), V at the last step alone
+    (_velocities gives a row's V from its A)."""
     T, N = targets.shape[0], P.shape[1]
     k1 = max(min(ks, N), 0)
+    k_v = 0 if full else N - 1
+    k_copy = 0 if full else (N - 1 if k1 == N else k1)
     for a in range(T):
         c0 = a * T
         px, vx, py, vy = _track(P, V, A, c0, 0, k1, p0[0], v0[0], p0[1], v0[1], targets[a, 0], targets[a, 1], dt,
-                                amax)
+                                amax, k_v)
         for b in range(T):
             c = c0 + b
             if b > 0:
-                for k in range(k1):
-                    P[c, k, 0], V[c, k, 0], A[c, k, 0] = P[c0, k, 0], V[c0, k, 0], A[c0, k, 0]
-                    P[c, k, 1], V[c, k, 1], A[c, k, 1] = P[c0, k, 1], V[c0, k, 1], A[c0, k, 1]
-            _track(P, V, A, c, k1, N, px, vx, py, vy, targets[b, 0], targets[b, 1], dt, amax)
+                for k in range(k_copy, k1):
+                    P[c, k, 0], A[c, k, 0] = P[c0, k, 0], A[c0, k, 0]
+                    P[c, k, 1], A[c, k, 1] = P[c0, k, 1], A[c0, k, 1]
+                    if k >= k_v:
+                        V[c, k, 0], V[c, k, 1] = V[c0, k, 0], V[c0, k, 1]
+            _track(P, V, A, c, k1, N, px, vx, py, vy, targets[b, 0], targets[b, 1], dt, amax, k_v)
+
+
+@njit(cache=True, nogil=True)
+def _velocities(A, v0, dt):
+    """(N, 2): the velocities of a row's accelerations A (N, 2) from v0, summed as _track sums them."""
+    N = A.shape[0]
+    V = np.empty((N, 2))
+    vx, vy = v0[0], v0[1]
+    for k in range(N):
+        vx += A[k, 0] * dt
+        vy += A[k, 1] * dt
+        V[k, 0], V[k, 1] = vx, vy
+    return V
 
 
 @njit(cache=True, nogil=True)
@@ -285,8 +307,9 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
     (the same choice, bit for bit, as costing every candidate, the weights, priors and gamma being >= 0;
     a NaN cost counts as infinite). owner (H,): the obstacle of each hypothesis, in ascending order.
     group, shared: rows a * group to a * group + group - 1 (a < group) start with the same ``shared`` steps
-    (P, A and so stop's prefix as _two_phase writes them): the terms of those steps are summed once per
-    group and each row goes on from there, the same sums in the same order (group 0: none shared)."""
+    (P, A and so stop's prefix as _two_phase writes them), which are read in the group's first row only
+    (the others' may be left unwritten): the terms of those steps are summed once per group and each row
+    goes on from there, the same sums in the same order (group 0: none shared)."""
     C, K = P.shape[0], P.shape[1]
     H = O.shape[0]
     start = np.zeros(n_obst + 1, np.int64)  # the hypotheses of obstacle o: start[o]:start[o + 1]
@@ -329,8 +352,10 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
             if c == first:
                 continue
         k0, st, g_sum, g_end, kp, ef = 0, 0.0, 0.0, 0.0, 0.0, 0.0
+        c0 = c
         if c < n_group * group:
             a = c // group
+            c0 = a * group
             k0, st, g_sum, g_end, kp, ef = ks, pre[a, 0], pre[a, 1], pre[a, 2], pre[a, 3], pre[a, 4]
         st, g_sum, g_end = _static_terms(P, stop, clear, goal, ox, oy, res, r_robot, m_s, w_hit, w_static, gx, gy,
                                          near_goal, r_goal, m_goal, c, k0, K + 1, st, g_sum, g_end)
@@ -352,8 +377,9 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
             for h in range(start[o], start[o + 1]):
                 s = 0.0
                 for k in range(K):
-                    dx = P[c, k, 0] - O[h, k, 0]
-                    dy = P[c, k, 1] - O[h, k, 1]
+                    row = c if k >= k0 else c0  # the shared steps: read in the group's first row
+                    dx = P[row, k, 0] - O[h, k, 0]
+                    dy = P[row, k, 1] - O[h, k, 1]
                     d2 = dx * dx + dy * dy
                     if d2 > far[h, k]:
                         continue  # farther than R + m_d: no term
@@ -471,12 +497,14 @@ class ManeuverSelector:
         self._buffers: dict = {}  # the candidates' arrays, reused from plan to plan
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None  # (t0, positions (N+1, 2), accelerations)
 
-    def candidates(self, p0, v0, guide_dir, previous_acc=None, approach=None, out: dict | None = None):
+    def candidates(self, p0, v0, guide_dir, previous_acc=None, approach=None, out: dict | None = None,
+                   full: bool = True):
         """Positions (C, N, 2), velocities, accelerations of every two-phase candidate, plus, when
         approach (2,) is given, flying straight to that point and stopping there (_approach), and, when
         previous_acc (N, 2) is given, the previous choice's accelerations flown again from now (last).
         out: a dict whose arrays are reused from call to call (new arrays when None): the arrays returned
-        are then that dict's, overwritten by the next call."""
+        are then that dict's, overwritten by the next call. Not ``full``: the two-phase rows hold only what
+        _best reads (_two_phase); _completed gives one whole."""
         e = np.asarray(guide_dir, float)[:2]
         e = e / max(np.linalg.norm(e), 1e-9)
         n = np.array([-e[1], e[0]])
@@ -493,7 +521,7 @@ class ManeuverSelector:
             if out.get("shape") != shape:
                 out.update(shape=shape, P=np.empty(shape), V=np.empty(shape), A=np.empty(shape))
             P, V, A = out["P"], out["V"], out["A"]
-        _two_phase(P, V, A, p0, v0, np.ascontiguousarray(T), self.k_switch, self.dt, self.a_max)
+        _two_phase(P, V, A, p0, v0, np.ascontiguousarray(T), self.k_switch, self.dt, self.a_max, full)
         if approach is not None:
             r = len(P) - extra
             P[r], V[r], A[r] = _approach(p0, v0, np.asarray(approach, float)[:2], self.N, self.dt, self.a_max,
@@ -520,7 +548,7 @@ class ManeuverSelector:
         q = self._least_cost_point(goal_field, origin_xy, resolution, goal_xy)
         if q is not None and np.hypot(*(q - p0)) > cfg.approach_range:
             q = None
-        P, V, A = self.candidates(p0, v0, guide_dir, prev_acc, q, out=self._buffers)
+        P, V, A = self.candidates(p0, v0, guide_dir, prev_acc, q, out=self._buffers, full=False)
         stop = _stopping_points(P, V, 2 * cfg.brake)
         O, R, G, owner, prior = [], [], [], [], []
         for j, ob in enumerate(obstacles):
@@ -547,9 +575,20 @@ class ManeuverSelector:
                         cfg.near_goal, r_goal, m_goal, len(P) - 1 if prev_acc is not None else -1,
                         len(self._grid), self.k_switch, parts)
         names = ["goal", "static", "dynamic", "keep", "effort"]
-        pos, vel = np.vstack([p0, P[b]]), np.vstack([v0, V[b]])
-        self._prev = (float(t0), pos, A[b].copy())
-        return Maneuver(pos, vel, A[b].copy(), float(cost), dict(zip(names, parts.round(4).tolist())), len(P))
+        pb, vb, ab = self._completed(P, V, A, b, v0)
+        pos, vel = np.vstack([p0, pb]), np.vstack([v0, vb])
+        self._prev = (float(t0), pos, ab)
+        return Maneuver(pos, vel, ab.copy(), float(cost), dict(zip(names, parts.round(4).tolist())), len(P))
+
+    def _completed(self, P, V, A, b: int, v0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Row b of candidates(full=False) as full=True gives it: positions, velocities, accelerations (N, 2)."""
+        T = len(self._grid)
+        if b >= T * T:  # the approach and the previous choice are written whole
+            return P[b].copy(), V[b].copy(), A[b].copy()
+        k1, first = max(min(self.k_switch, self.N), 0), b - b % T
+        pb, ab = P[b].copy(), A[b].copy()
+        pb[:k1], ab[:k1] = P[first, :k1], A[first, :k1]
+        return pb, _velocities(ab, v0, self.dt), ab
 
     @staticmethod
     def _least_cost_point(goal_field: np.ndarray, origin_xy, resolution: float, goal_xy) -> np.ndarray | None:

@@ -294,11 +294,35 @@ def test_shared_first_steps_give_the_same_choice_bit_for_bit(seed):
     for a in range(T):
         for key in ("P", "A"):
             k[key][a * T + 1:a * T + T, :ks] = k[key][a * T, :ks]
+    grouped = {}
     for first in (-1, 299, 5):
         b0, c0, p0 = _run_best(k, first)
         b1, c1, p1 = _run_best(k, first, T, ks)
         assert (b0, c0) == (b1, c1)
         assert np.array_equal(p0, p1)
+        grouped[first] = (b1, c1, p1)
+    for a in range(T):  # the shared steps are read in each group's first row only: others' may be anything
+        k["P"][a * T + 1:a * T + T, :ks] = k["O"][0, :ks]  # (here: on a walker)
+        k["A"][a * T + 1:a * T + T, :ks] = 50.0
+    for first in (-1, 299, 5):
+        b2, c2, p2 = _run_best(k, first, T, ks)
+        assert (b2, c2) == grouped[first][:2] and np.array_equal(p2, grouped[first][2])
+
+
+@pytest.mark.parametrize("k_switch", [0, 3, 10, 25, 30])
+def test_candidates_written_for_the_choice_complete_to_the_full_rows(k_switch):
+    """candidates(full=False) leaves out what _best does not read; _completed gives every row back as
+    full=True writes it, and the stopping points (last step) are written in every row."""
+    sel = ManeuverSelector()
+    sel.k_switch = k_switch
+    args = (np.array([2.0, 0.3]), np.array([1.8, -0.7]), np.array([1.0, 0.2]), np.full((25, 2), 0.4),
+            np.array([3.0, 1.0]))
+    P, V, A = (x.copy() for x in sel.candidates(*args))
+    Pp, Vp, Ap = sel.candidates(*args, out={}, full=False)
+    assert np.array_equal(P[:, -1], Pp[:, -1]) and np.array_equal(V[:, -1], Vp[:, -1])
+    for b in range(len(P)):
+        pb, vb, ab = sel._completed(Pp, Vp, Ap, b, args[1])
+        assert np.array_equal(pb, P[b]) and np.array_equal(vb, V[b]) and np.array_equal(ab, A[b])
 
 
 def test_candidates_reuse_their_buffers_without_changing_them():
