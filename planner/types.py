@@ -11,6 +11,37 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
+from numba import njit
+
+
+def _vec3(x) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    if a.shape != (3,):
+        raise ValueError(f"ObstaclePrediction: a centre, velocity or acceleration must have 3 values, not {a.shape}")
+    return a
+
+
+@njit(cache=True, nogil=True)
+def _predict(times, c, v, a, horizon, vmax):
+    """ObstaclePrediction.predict's centres (K, 3), computed as its definition does in numpy, operation for
+    operation (the speed's norm summed x, y, then z, as numpy's reduction does): the same floats."""
+    K = times.shape[0]
+    out = np.empty((K, 3))
+    ve = np.empty(3)
+    for k in range(K):
+        t = times[k]
+        ta = t if t < horizon or t != t else horizon  # np.minimum's: NaN if either is
+        if horizon != horizon:
+            ta = horizon
+        for d in range(3):
+            ve[d] = v[d] + a[d] * ta
+        speed = np.sqrt((ve[0] * ve[0] + ve[1] * ve[1]) + ve[2] * ve[2])
+        f = 1.0
+        if speed > vmax:
+            f = vmax / (speed if speed > 1e-9 or speed != speed else 1e-9)
+        for d in range(3):
+            out[k, d] = c[d] + ((v[d] * ta + 0.5 * a[d] * ta * ta) + (ve[d] * f) * (t - ta))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,18 +65,8 @@ class ObstaclePrediction:
 
     def predict(self, times: np.ndarray) -> np.ndarray:
         """Centres at ``times`` seconds ahead (K,) -> (K, 3)."""
-        t = np.asarray(times, dtype=float)[:, None]
-        ta = np.minimum(t, self.accel_horizon)
-        disp = (self.velocity * ta + 0.5 * self.acceleration * ta * ta) + self.cruise_velocity(times) * (t - ta)
-        return self.center + disp
-
-    def cruise_velocity(self, times: np.ndarray) -> np.ndarray:
-        """(K, 3): the velocity the prediction goes on at after accelerating for min(t, accel_horizon), its
-        speed capped at max_speed (the velocity from accel_horizon on)."""
-        t = np.asarray(times, dtype=float)[:, None]
-        v_end = self.velocity + self.acceleration * np.minimum(t, self.accel_horizon)
-        speed = np.linalg.norm(v_end, axis=1, keepdims=True)
-        return v_end * np.where(speed > self.max_speed, self.max_speed / np.maximum(speed, 1e-9), 1.0)
+        return _predict(np.asarray(times, dtype=float), _vec3(self.center), _vec3(self.velocity),
+                        _vec3(self.acceleration), float(self.accel_horizon), float(self.max_speed))
 
     def std_at(self, times: np.ndarray) -> np.ndarray:
         """Position standard deviation at ``times`` seconds ahead (K,)."""
