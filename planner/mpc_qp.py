@@ -97,6 +97,7 @@ class QPLayout:
         # per-step blocks (offset, width) of z and of the duals y, for shifting a solution in time
         self.xblocks = [(0, 6), (self.iu, 3), (self.isd, 1), (self.iss, 1)]
         self.yblocks = [(0, 6), (6 * N, 9), (self.rd, Md), (self.rs, Ks), (self.rg, 4)]
+        self._shifts: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # s -> shift()'s gather indices of z, y
 
     def new_solver(self) -> osqp.OSQP:
         """An OSQP instance set up on this structure (q = 0, constant bounds) with the config's settings."""
@@ -108,11 +109,15 @@ class QPLayout:
 
     def shift(self, z, y, s: int):
         """A primal-dual solution (z, y) moved s steps earlier in time, each block's last step repeated."""
-        return self._shift(z, self.xblocks, s), self._shift(y, self.yblocks, s)
+        iz, iy = self._shifts.get(s) or self._shifts.setdefault(
+            s, (self._shift_index(self.n, self.xblocks, s), self._shift_index(self.m, self.yblocks, s)))
+        return np.asarray(z)[iz], np.asarray(y)[iy]
 
-    def _shift(self, vec, blocks, s):
-        out = vec.copy()
+    def _shift_index(self, size: int, blocks, s: int) -> np.ndarray:
+        """(size,) where each entry of a shifted vector comes from: per block of N steps of width w, step k
+        from step min(k + s, N - 1); entries outside the blocks stay."""
+        idx = np.arange(size)
+        step = np.minimum(np.arange(self.N) + s, self.N - 1)
         for off, w in blocks:
-            b = vec[off:off + self.N * w].reshape(self.N, w)
-            out[off:off + self.N * w] = np.vstack([b[s:], np.repeat(b[-1:], s, axis=0)]).ravel()
-        return out
+            idx[off:off + self.N * w] = (off + step[:, None] * w + np.arange(w)).ravel()
+        return idx

@@ -288,3 +288,18 @@ def test_squeezed_side_is_left_for_the_open_one(homotopy):
         assert min(gap) > hard - 0.1
     else:
         assert max(slack) > 0.2 and min(ys) > 0.0  # squeezed on the left
+
+
+def test_a_solution_shifted_in_time_moves_every_block_and_repeats_its_last_step():
+    qp = MPC(MPCConfig()).qp
+    N, rng = qp.N, np.random.default_rng(0)
+    for s in (0, 1, 3, N - 1, N):
+        z, y = rng.normal(size=qp.n), rng.normal(size=qp.m)
+        zs, ys = qp.shift(z, y, s)
+        for vec, out, blocks in ((z, zs, qp.xblocks), (y, ys, qp.yblocks)):
+            inside = np.zeros(len(vec), bool)
+            for off, w in blocks:
+                b, got = vec[off:off + N * w].reshape(N, w), out[off:off + N * w].reshape(N, w)
+                np.testing.assert_array_equal(got, np.vstack([b[s:], np.repeat(b[-1:], s, axis=0)]))
+                inside[off:off + N * w] = True
+            np.testing.assert_array_equal(out[~inside], vec[~inside])
