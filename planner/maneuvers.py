@@ -179,18 +179,9 @@ def _two_phase(P, V, A, p0, v0, targets, ks, dt, amax, full):
                 st[q, 0], st[q, 1], st[q, 2], st[q, 3] = px, vx, py, vy
             for k in range(k1, N):
                 for q in range(nb):
-                    c = c0 + b + q
-                    tx, ty = targets[b + q, 0], targets[b + q, 1]
-                    ax = min(max((tx - st[q, 1]) / dt, -amax), amax)
-                    st[q, 0] += st[q, 1] * dt + 0.5 * ax * dt * dt
-                    st[q, 1] += ax * dt
-                    ay = min(max((ty - st[q, 3]) / dt, -amax), amax)
-                    st[q, 2] += st[q, 3] * dt + 0.5 * ay * dt * dt
-                    st[q, 3] += ay * dt
-                    P[c, k, 0], A[c, k, 0] = st[q, 0], ax
-                    P[c, k, 1], A[c, k, 1] = st[q, 2], ay
-                    if k >= k_v:
-                        V[c, k, 0], V[c, k, 1] = st[q, 1], st[q, 3]
+                    st[q, 0], st[q, 1], st[q, 2], st[q, 3] = _track(
+                        P, V, A, c0 + b + q, k, k + 1, st[q, 0], st[q, 1], st[q, 2], st[q, 3], targets[b + q, 0],
+                        targets[b + q, 1], dt, amax, k_v)
 
 
 @njit(cache=True, nogil=True)
