@@ -15,19 +15,19 @@ from numba import njit
 from planner.mpc_config import MPCConfig
 
 
-def tie_break(cfg: MPCConfig, d, side, forced=None, bias=None):
-    """Offsets d (N, J, 3) from obstacle j to c_k whose component along side[j] is below side_bias get
-    it raised to side_bias (on their side, left if 0): a symmetric head-on plan would otherwise only
-    ever brake or push through on slack. Any tangent plane is conservative. `side`: left of the
-    obstacle's velocity relative to the planned motion (relative_side), else left of travel.
-    forced (J,) in {-1, 0, +1}: where non-zero, the offset is put on that side (mirrored across the
-    line if it lies on the other), so every plane asks the plan to pass the obstacle there."""
-    lat = np.sum(d * side, axis=-1)
-    sgn = np.where(lat < 0, -1.0, 1.0)
-    if forced is not None:
-        sgn = np.where(forced != 0, forced, sgn)
-    bias = cfg.side_bias if bias is None else bias
-    return d + (sgn * np.maximum(np.abs(lat), bias) - lat)[..., None] * side
+@njit(cache=True, nogil=True, inline="always")
+def _tie_break(d0, d1, d2, s, forced, bias):
+    """The offset d from an obstacle to c_k after the tie-break (dynamic_rows): d's component along the
+    side s (3,) below bias is raised to bias, on d's side (left if 0) or the forced one (-1, +1; 0: d's)."""
+    lat = (d0 * s[0] + d1 * s[1]) + d2 * s[2]
+    sgn = -1.0 if lat < 0 else 1.0
+    if forced != 0:
+        sgn = forced
+    m = abs(lat)
+    if not (m >= bias or m != m) or bias != bias:  # np.maximum's: NaN if either is
+        m = bias
+    e = sgn * m - lat
+    return d0 + e * s[0], d1 + e * s[1], d2 + e * s[2]
 
 
 def dynamic_candidates(cfg: MPCConfig, c, obstacles, side, v_plan=None):
@@ -57,25 +57,57 @@ def dynamic_candidates(cfg: MPCConfig, c, obstacles, side, v_plan=None):
 
 def dynamic_rows(cfg: MPCConfig, c, cand, p0, forced=None, bias=None):
     """(4): unit normals (N, J, 3) and right-hand sides (N, J) for the candidates (dynamic_candidates);
-    forced (J,): the side each must be passed on (0: the tie-break rule's)."""
+    forced (J,): the side each must be passed on (0: the tie-break rule's).
+
+    Tie-break: offsets d from obstacle j to c_k whose component along its side (dynamic_candidates: left
+    of the obstacle's velocity relative to the planned motion, else left of travel) is below side_bias
+    get it raised to side_bias, on their side (left if 0), or, where forced is non-zero, on that side
+    (mirrored across the line if it lies on the other): a symmetric head-on plan would otherwise only
+    ever brake or push through on slack, and every plane then asks the plan to pass the obstacle there.
+    Any tangent plane is conservative."""
     N = cfg.horizon
     if not cand:
         return np.zeros((N, 0, 3)), np.zeros((N, 0))
     o = np.stack([e[2] for e in cand], axis=1)  # (N, J, 3)
     ax = np.stack([e[3] for e in cand], axis=1)
     side = np.stack([e[4] for e in cand])  # (J, 3)
-    # an ellipsoid spanning the whole altitude band (a person) is treated as its elliptic cylinder:
-    # horizontal normals, so the plan goes around it rather than climbing along its shoulder
-    tall = ((o[..., 2] - ax[..., 2] <= cfg.z_min) & (o[..., 2] + ax[..., 2] >= cfg.z_max))[..., None]
-    flat = np.where(tall, np.array([1.0, 1.0, 0.0]), 1.0)
-    d = tie_break(cfg, (c[:, None, :] - o) * flat, side, forced, bias)
-    away = (p0 - o) * flat  # c_k at the centre (only with side_bias = 0): toward the drone, else +y
-    away = np.where(np.linalg.norm(away, axis=-1, keepdims=True) > 1e-9, away, np.array([0.0, 1.0, 0.0]))
-    d = np.where(np.linalg.norm(d, axis=-1, keepdims=True) < 1e-9, away, d)
-    cs = o + d / np.sqrt(np.sum((d / ax) ** 2, axis=-1, keepdims=True))  # on the surface
-    g = (cs - o) / ax ** 2
-    n = g / np.linalg.norm(g, axis=-1, keepdims=True)
-    return n, np.sum(n * cs, axis=-1)
+    J = len(cand)
+    fz = np.zeros(J) if forced is None else np.asarray(forced, dtype=float).reshape(J)
+    n, b = np.empty((N, J, 3)), np.empty((N, J))
+    _planes(np.ascontiguousarray(c, dtype=float), o, ax, np.ascontiguousarray(side, dtype=float), fz,
+            np.asarray(p0, dtype=float), float(cfg.side_bias if bias is None else bias), float(cfg.z_min),
+            float(cfg.z_max), n, b)
+    return n, b
+
+
+@njit(cache=True, nogil=True)
+def _planes(c, o, ax, side, forced, p0, bias, z_min, z_max, n_out, b_out):
+    """dynamic_rows' tangent planes, each computed as the numpy definition computes it, operation for
+    operation (sums over x, y, z in that order, as numpy's reductions over 3 do): the same floats.
+    An ellipsoid spanning the whole altitude band (a person) is treated as its elliptic cylinder
+    (horizontal offsets, so the plan goes around it rather than climbing along its shoulder); c_k at the
+    centre (only with side_bias = 0) is moved toward the drone, else +y; the plane touches the
+    ellipsoid where the offset from its centre meets its surface."""
+    N, J = o.shape[0], o.shape[1]
+    for k in range(N):
+        for j in range(J):
+            o0, o1, o2 = o[k, j, 0], o[k, j, 1], o[k, j, 2]
+            a0, a1, a2 = ax[k, j, 0], ax[k, j, 1], ax[k, j, 2]
+            fl = 0.0 if (o2 - a2 <= z_min) and (o2 + a2 >= z_max) else 1.0
+            d0, d1, d2 = _tie_break(c[k, 0] - o0, c[k, 1] - o1, (c[k, 2] - o2) * fl, side[j], forced[j], bias)
+            w0, w1, w2 = p0[0] - o0, p0[1] - o1, (p0[2] - o2) * fl
+            if not math.sqrt((w0 * w0 + w1 * w1) + w2 * w2) > 1e-9:
+                w0, w1, w2 = 0.0, 1.0, 0.0
+            if math.sqrt((d0 * d0 + d1 * d1) + d2 * d2) < 1e-9:
+                d0, d1, d2 = w0, w1, w2
+            q0, q1, q2 = d0 / a0, d1 / a1, d2 / a2
+            r = math.sqrt((q0 * q0 + q1 * q1) + q2 * q2)
+            s0, s1, s2 = o0 + d0 / r, o1 + d1 / r, o2 + d2 / r
+            g0, g1, g2 = (s0 - o0) / (a0 * a0), (s1 - o1) / (a1 * a1), (s2 - o2) / (a2 * a2)
+            ng = math.sqrt((g0 * g0 + g1 * g1) + g2 * g2)
+            n0, n1, n2 = g0 / ng, g1 / ng, g2 / ng
+            n_out[k, j, 0], n_out[k, j, 1], n_out[k, j, 2] = n0, n1, n2
+            b_out[k, j] = (n0 * s0 + n1 * s1) + n2 * s2
 
 
 def slide_clear(cfg: MPCConfig, c, PT, d2, req, side):

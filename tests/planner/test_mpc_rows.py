@@ -1,4 +1,4 @@
-"""The MPC's static half-space rows (planner.mpc_rows.static_rows) against their definition."""
+"""The MPC's half-space rows (planner.mpc_rows: static_rows, dynamic_rows) against their definitions."""
 import numpy as np
 import pytest
 
@@ -109,3 +109,50 @@ def test_compiled_row_filters_equal_the_boolean_masks():
         np.testing.assert_array_equal(q, p[np.all(np.isfinite(p), axis=1)])
         lo, hi = rng.normal(size=3) - 1, rng.normal(size=3) + 1
         np.testing.assert_array_equal(_inside(q, lo, hi), q[np.all((q >= lo) & (q <= hi), axis=1)])
+
+
+def _dynamic_rows_by_definition(cfg, c, cand, p0, forced, bias):
+    """(4) in numpy: the offset from each predicted centre to c_k (horizontal for a person spanning the
+    altitude band), tie-broken to at least the bias along its side (or the forced side), the point where
+    it meets the ellipsoid, and the tangent plane there."""
+    o = np.stack([e[2] for e in cand], axis=1)
+    ax = np.stack([e[3] for e in cand], axis=1)
+    side = np.stack([e[4] for e in cand])
+    tall = ((o[..., 2] - ax[..., 2] <= cfg.z_min) & (o[..., 2] + ax[..., 2] >= cfg.z_max))[..., None]
+    flat = np.where(tall, np.array([1.0, 1.0, 0.0]), 1.0)
+    d = (c[:, None, :] - o) * flat
+    lat = np.sum(d * side, axis=-1)
+    sgn = np.where(lat < 0, -1.0, 1.0)
+    if forced is not None:
+        sgn = np.where(forced != 0, forced, sgn)
+    d = d + (sgn * np.maximum(np.abs(lat), cfg.side_bias if bias is None else bias) - lat)[..., None] * side
+    away = (p0 - o) * flat
+    away = np.where(np.linalg.norm(away, axis=-1, keepdims=True) > 1e-9, away, np.array([0.0, 1.0, 0.0]))
+    d = np.where(np.linalg.norm(d, axis=-1, keepdims=True) < 1e-9, away, d)
+    cs = o + d / np.sqrt(np.sum((d / ax) ** 2, axis=-1, keepdims=True))
+    g = (cs - o) / ax ** 2
+    n = g / np.linalg.norm(g, axis=-1, keepdims=True)
+    return n, np.sum(n * cs, axis=-1)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_dynamic_rows_give_the_definitions_floats(seed):
+    from planner.mpc_rows import dynamic_rows
+    cfg, rng = MPCConfig(), np.random.default_rng(seed)
+    N = cfg.horizon
+    for it in range(300):
+        c, p0 = rng.normal(0, 3, (N, 3)), rng.normal(0, 3, 3)
+        cand = []
+        for j in range(int(rng.integers(1, 5))):
+            o = c.copy() if it % 7 == 0 else rng.normal(0, 3, (N, 3))  # c_k on the centre, or anywhere
+            ax = np.abs(rng.normal(0.6, 0.3, (N, 3))) + 0.05
+            if it % 3 == 0:
+                ax[:, 2] = 5.0  # spanning the altitude band
+            sd = rng.normal(0, 1, 3)
+            cand.append((0.0, j, o, ax, sd / np.linalg.norm(sd)))
+        forced = None if it % 2 else rng.choice([-1.0, 0.0, 1.0], len(cand))
+        bias = (None, 0.0, 0.3)[it % 3]
+        got = dynamic_rows(cfg, c, cand, p0, forced, bias)
+        want = _dynamic_rows_by_definition(cfg, c, cand, p0, forced, bias)
+        for g, w in zip(got, want):
+            assert g.shape == w.shape and g.tobytes() == w.tobytes()
