@@ -11,6 +11,12 @@ parent (tested), and the parent spends no time on noise.
 It pays off only when the parent has something to do while the child renders: the World asks for
 this with ``frame_latency >= 1`` (a frame is delivered one or more camera periods after its
 capture), and the parent runs perception and planning on the previous frame meanwhile.
+
+A child outlives its world: when the world closes, the child closes its copy and waits, and the next
+world of the same process (the next episode of a loop or of a sweep's worker) has it build the new
+one, without a new interpreter, imports, compiled code or GL context (about a second per episode).
+Every world starts from its scenario and seed alone, so its frames are those a fresh child gives
+(tested).
 """
 from __future__ import annotations
 
@@ -31,7 +37,22 @@ class RenderProcessError(RuntimeError):
     """The render process failed or stopped answering."""
 
 
-def _serve(conn, scenario, seed, renderer, segmentation, light_direction, color) -> None:
+def _serve(conn) -> None:
+    """The child's life: worlds one after another, each built from the parent's settings and served until
+    the parent releases it (None); the interpreter, its imports and compiled code, and the GL context
+    serve them all. Ends when the parent closes its end or a world fails."""
+    while True:
+        try:
+            args = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        if args is None or not _serve_world(conn, *args):
+            return
+
+
+def _serve_world(conn, scenario, seed, renderer, segmentation, light_direction, color) -> bool:
+    """Build one world and answer its frames until the parent releases it: True, ready for another;
+    False when the parent is gone or something failed (reported to the parent)."""
     from sim.world import World  # in the child only
 
     try:
@@ -39,7 +60,7 @@ def _serve(conn, scenario, seed, renderer, segmentation, light_direction, color)
                       light_direction=light_direction, color=color)
     except Exception as e:  # noqa: BLE001 - reported to the parent, which raises it
         conn.send(("error", f"{type(e).__name__}: {e}"))
-        return
+        return False
     conn.send(("ready", world.renderer))
     # The frame reset() rendered (t = 0, the start pose) answers frame 0: the EGL renderer's first frames are
     # not all alike (the same pose's colour differed between a first and a later render), so the child renders
@@ -49,7 +70,7 @@ def _serve(conn, scenario, seed, renderer, segmentation, light_direction, color)
         while True:
             msg = conn.recv()
             if msg is None:
-                break
+                return True
             seq, t, pos, quat, people, light = msg
             r0 = world.render_wall_time  # the renderer's share (benchmarks), without the noise
             if seq == 0 and first is not None:
@@ -63,14 +84,46 @@ def _serve(conn, scenario, seed, renderer, segmentation, light_direction, color)
                 if a is not None:
                     conn.send_bytes(memoryview(np.ascontiguousarray(a)).cast("B"))
     except (EOFError, OSError, KeyboardInterrupt):  # the parent closed its end
-        pass
+        return False
     except Exception:  # noqa: BLE001
         try:
             conn.send(("error", traceback.format_exc(limit=5)))
         except (BrokenPipeError, OSError):
             pass
+        return False
     finally:
         world.close()
+
+
+_IDLE: list[tuple[subprocess.Popen, Connection]] = []  # released children of this process, ready for a world
+_MAX_IDLE = 1  # kept per process: a loop or a sweep worker flies one episode at a time
+
+
+def _idle_child() -> tuple[subprocess.Popen, Connection] | None:
+    """A released child that is still running, or None."""
+    while _IDLE:
+        proc, conn = _IDLE.pop()
+        if proc.poll() is None:
+            return proc, conn
+        conn.close()
+    return None
+
+
+def _spawn() -> tuple[subprocess.Popen, Connection]:
+    """A fresh interpreter (no PyBullet/EGL or thread state copied from us, and, unlike multiprocessing's
+    spawn, no re-import of the user's main script) on one end of a socket pair."""
+    ours, theirs = socket.socketpair()
+    env = dict(os.environ)
+    # Mesa's llvmpipe rasterises on extra threads by default; beside a busy parent on two cores they only
+    # contend (corridor closed loop: 1.18x real time with them, 1.23x without). A user's setting wins.
+    env.setdefault("LP_NUM_THREADS", "0")
+    # (the child ends itself when this process is gone: sim.parent_watch)
+    proc = subprocess.Popen([sys.executable, "-m", "sim.render_process", str(theirs.fileno()), str(os.getpid())],
+                            pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
+    theirs.close()
+    conn = Connection(os.dup(ours.fileno()))
+    ours.close()
+    return proc, conn
 
 
 class RenderProcess:
@@ -78,42 +131,49 @@ class RenderProcess:
 
     def __init__(self, scenario, seed: int, renderer: str, segmentation: bool, light_direction=None,
                  color: bool = True):
-        # A fresh interpreter (no PyBullet/EGL or thread state copied from us, and, unlike
-        # multiprocessing's spawn, no re-import of the user's main script) on one end of a socket pair.
-        ours, theirs = socket.socketpair()
-        env = dict(os.environ)
-        # Mesa's llvmpipe rasterises on extra threads by default; beside a busy parent on two cores they only
-        # contend (corridor closed loop: 1.18x real time with them, 1.23x without). A user's setting wins.
-        env.setdefault("LP_NUM_THREADS", "0")
-        # (the child ends itself when this process is gone: sim.parent_watch)
-        self._proc = subprocess.Popen([sys.executable, "-m", "sim.render_process", str(theirs.fileno()),
-                                       str(os.getpid())], pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
-        theirs.close()
-        self._conn = Connection(os.dup(ours.fileno()))
-        ours.close()
+        # A child released by an earlier world of this process builds this one (a second or so of start-up
+        # saved per episode); a fresh one is started when there is none, or when the released one fails.
         self._outstanding: list[int] = []
         self.render_wall_time = 0.0
+        self._healthy = False
+        config = (scenario, seed, renderer, segmentation, light_direction, color)
+        reused = _idle_child()
+        if reused is not None:
+            self._proc, self._conn = reused
+            try:
+                self.renderer = self._start(config)
+                return
+            except RenderProcessError:
+                self._end()
+        self._proc, self._conn = _spawn()
+        self.renderer = self._start(config)
+
+    def _start(self, config) -> str:
+        """Has the child build the world of ``config``: its renderer's name. Ends the child on failure."""
         try:
-            self._conn.send((scenario, seed, renderer, segmentation, light_direction, color))
+            self._conn.send(config)
             kind, value = self._recv(_START_TIMEOUT_S, "starting")
         except BaseException:  # no answer in time, the child gone, Ctrl-C: a child still building is ended now
-            self._proc.kill()
-            self.close()
+            self._end()
             raise
         if kind != "ready":
-            self.close()
+            self._end()
             raise RenderProcessError(f"the render process could not build the world: {value}")
-        self.renderer = value
+        self._healthy = True
+        return value
 
     def _recv(self, timeout: float, doing: str):
         if not self._conn.poll(timeout):
+            self._healthy = False
             raise RenderProcessError(f"the render process did not answer within {timeout:.0f} s ({doing})")
         try:
             msg = self._conn.recv()
-        except EOFError:
+        except (EOFError, OSError):
+            self._healthy = False
             raise RenderProcessError(f"the render process stopped ({doing}; exit code {self._proc.poll()})") \
                 from None
         if msg[0] == "error":
+            self._healthy = False
             raise RenderProcessError(f"the render process failed ({doing}): {msg[1]}")
         return msg[0], msg[1:] if len(msg) > 2 else msg[1]
 
@@ -123,6 +183,7 @@ class RenderProcess:
         try:
             self._conn.send((seq, float(t), tuple(pos), tuple(quat), list(people), light))
         except (BrokenPipeError, OSError):
+            self._healthy = False
             raise RenderProcessError(f"the render process stopped (exit code {self._proc.poll()})") from None
         self._outstanding.append(seq)
 
@@ -148,31 +209,49 @@ class RenderProcess:
         return tuple(out)
 
     def close(self) -> None:
+        """Releases the child for this process's next world (its frames still in flight read and dropped),
+        or ends it when it failed or enough children wait already."""
+        if self._proc is None:
+            return
+        try:
+            while self._healthy and self._outstanding:
+                self.result(self._outstanding[0])
+        except RenderProcessError:
+            pass
+        if self._healthy and self._proc.poll() is None and len(_IDLE) < _MAX_IDLE:
+            try:
+                self._conn.send(None)  # the child closes this world and waits for the next
+                _IDLE.append((self._proc, self._conn))
+                self._proc = self._conn = None
+                return
+            except (BrokenPipeError, OSError):
+                pass
+        self._end()
+
+    def _end(self) -> None:
+        """Ends the child: closing our end ends it whether it waits for a message or is blocked on sending
+        a frame nobody will read."""
         if self._proc is None:
             return
         try:
             self._conn.send(None)
+            self._conn.send(None)  # releases a world if one is open, then ends the child
         except (BrokenPipeError, OSError):
             pass
-        # Closing our end also ends a child blocked on sending a frame nobody will read.
         self._conn.close()
         try:
             self._proc.wait(timeout=10.0)
         except subprocess.TimeoutExpired:
             self._proc.kill()
             self._proc.wait(timeout=5.0)
-        self._proc = None
+        self._proc = self._conn = None
+        self._healthy = False
 
 
 if __name__ == "__main__":  # the child: python -m sim.render_process FD PARENT_PID
     from sim.parent_watch import exit_with_parent
 
     exit_with_parent(int(sys.argv[2]))
-    _conn = Connection(int(sys.argv[1]))
-    try:
-        _args = _conn.recv()
-    except EOFError:
-        sys.exit(0)
-    _serve(_conn, *_args)
+    _serve(Connection(int(sys.argv[1])))
     # Leave without the interpreter's teardown: with llvmpipe's threads it can hang after EGL was used.
     os._exit(0)

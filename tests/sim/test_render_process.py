@@ -67,3 +67,19 @@ def test_a_dead_render_process_is_a_clear_error():
         with pytest.raises(RenderProcessError, match="render process"):
             for _ in range(8):
                 w.step(REF)
+
+
+def test_a_released_render_process_builds_the_next_world_with_the_same_frames():
+    from sim import render_process
+
+    here = _frames(40, frame_latency=1)
+    with World(load_scenario("corridor"), seed=0, frame_latency=1, render_process=True) as w:
+        for _ in range(12):
+            w.step(REF)  # frames of another world, one still in flight when it closes
+        first = w._render_proc._proc.pid
+    assert [proc.pid for proc, _ in render_process._IDLE] == [first]  # released, not ended
+    with World(load_scenario("corridor"), seed=3, frame_latency=1, render_process=True) as w:
+        assert w._render_proc._proc.pid == first and not render_process._IDLE  # built by the same child
+    beside = _frames(40, frame_latency=1, render_process=True)
+    assert len(here) == len(beside) == 10
+    assert all(_same(a, b) for a, b in zip(here, beside))
