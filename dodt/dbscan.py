@@ -174,6 +174,35 @@ def _dbscan_kernel(points, eps, min_points):
     return labels
 
 
+@njit(cache=True, nogil=True)
+def _bounds(pts):
+    """Per-column minimum and maximum of an (N, 3) array as float64, the values numpy's
+    min(axis=0) and max(axis=0) give (a NaN in a column makes both NaN)."""
+    n = pts.shape[0]
+    if n == 0:
+        raise ValueError("no points")
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        mn = pts[0, a]
+        mx = mn
+        for i in range(1, n):
+            v = pts[i, a]
+            if v != v:  # NaN wins, as in numpy
+                mn = v
+                mx = v
+                break
+            if v < mn:
+                mn = v
+            elif v > mx:
+                mx = v
+        if mn != mn:
+            mx = mn
+        lo[a] = mn
+        hi[a] = mx
+    return lo, hi
+
+
 def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
     """Cluster label per point (0, 1, ... in order of first core point), -1 for noise; the border
     rule is in the module docstring."""
@@ -307,7 +336,7 @@ class DBSCANDetector:
             cluster = points[order[s:e]]
             for part in split_parts(cluster, self.cfg):
                 pts = cluster[part]
-                lo, hi = pts.min(axis=0).astype(float), pts.max(axis=0).astype(float)
+                lo, hi = _bounds(pts)
                 grow = np.maximum(self.cfg.min_size_xy - (hi - lo)[:2], 0.0) / 2
                 lo[:2] -= grow
                 hi[:2] += grow
