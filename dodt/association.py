@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from dodt.config import AssociationConfig
 from dodt.detection import Detection
@@ -31,11 +32,45 @@ class TrackView:
     position_variance: float
 
 
+@njit(cache=True, nogil=True)
+def _std_columns_f32(pts):
+    """Per-column standard deviation of an (N, 3) float32 array, as numpy's std(axis=0) computes
+    it: float32 column sums accumulated row after row from 0, the mean, the squared deviations
+    summed the same way, divided by N, the square root; as float64."""
+    n = pts.shape[0]
+    out = np.empty(3)
+    nf = np.float32(n)
+    for a in range(3):
+        acc = np.float32(0.0)
+        for i in range(n):
+            acc += pts[i, a]
+        mean = acc / nf
+        acc = np.float32(0.0)
+        for i in range(n):
+            d = pts[i, a] - mean
+            acc += d * d
+        out[a] = np.sqrt(acc / nf)
+    return out
+
+
+def _std_columns(pts: np.ndarray) -> np.ndarray:
+    """pts.std(axis=0) as float64."""
+    if pts.dtype == np.float32 and pts.ndim == 2 and pts.shape[1] == 3 and pts.flags.c_contiguous:
+        return _std_columns_f32(pts)
+    return pts.std(axis=0).astype(float)
+
+
 def features(det: Detection) -> tuple[int, np.ndarray]:
+    """(point count, per-axis standard deviation of the points). Association and the track's
+    update both ask for a detection's features; they are kept on the detection for as long as
+    its ``points`` stay the same array."""
     pts = det.points
-    if len(pts) >= 2:
-        return len(pts), pts.std(axis=0).astype(float)
-    return len(pts), np.zeros(3)
+    kept = getattr(det, "_features", None)
+    if kept is not None and kept[0] is pts:
+        return kept[1]
+    f = (len(pts), _std_columns(pts)) if len(pts) >= 2 else (len(pts), np.zeros(3))
+    det._features = (pts, f)
+    return f
 
 
 def similarity_matrix(tracks: list[TrackView], dets: list[Detection], cfg: AssociationConfig,
