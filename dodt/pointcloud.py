@@ -19,35 +19,63 @@ from dodt.frames import CameraIntrinsics
 
 
 @njit(cache=True, nogil=True)
+def _project_row(d_row, u_off, v_off, fx, fy, R, t, origin, res, dmin, dmax, zlo, zhi, nf, xyz, keys):
+    """World points and voxel keys of one row's sampled pixels (key -1: the pixel is dropped).
+    Branch-free, so that the compiler can vectorise it."""
+    r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
+    r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    t0, t1, t2 = t[0], t[1], t[2]
+    o0, o1, o2 = origin[0], origin[1], origin[2]
+    for j in range(d_row.shape[0]):
+        d = d_row[j]
+        xc = u_off[j] * d / fx
+        yc = v_off * d / fy
+        x = r00 * xc + r01 * yc + r02 * d + t0
+        y = r10 * xc + r11 * yc + r12 * d + t1
+        z = r20 * xc + r21 * yc + r22 * d + t2
+        ix = np.floor((x - o0) / res)
+        iy = np.floor((y - o1) / res)
+        iz = np.floor((z - o2) / res)
+        # the depth range (also false for NaN), the height band, the grid
+        ok = ((d >= dmin) & (d <= dmax) & (z >= zlo) & (z <= zhi) & (ix >= 0.0) & (iy >= 0.0) & (iz >= 0.0)
+              & (ix < nf) & (iy < nf) & (iz < nf))
+        xyz[0, j] = x
+        xyz[1, j] = y
+        xyz[2, j] = z
+        keys[j] = np.int64(((ix * nf + iy) * nf + iz) if ok else -1.0)
+
+
+@njit(cache=True, nogil=True)
 def _cloud_voxel_kernel(depth, fx, fy, cx, cy, R, t, margin, skip, dmin, dmax, res, thresh, ref_dist, min_thresh,
                         zlo, zhi, origin, n, counts, sums, touched):
     H, W = depth.shape
     n_touched = 0
+    # Row by row: the sampled pixels are projected in one vectorised pass, then accumulated into
+    # their voxels in pixel order.
+    nu = max(0, (W - 2 * margin + skip - 1) // skip)
+    u_off = np.empty(nu)
+    for j in range(nu):
+        u_off[j] = (margin + j * skip) - cx
+    d_row = np.empty(nu)
+    xyz = np.empty((3, nu))
+    keys = np.empty(nu, np.int64)
+    nf = float(n)
     for v in range(margin, H - margin, skip):
-        for u in range(margin, W - margin, skip):
-            d = depth[v, u]
-            if not (d >= dmin and d <= dmax):  # also false for NaN
+        for j in range(nu):
+            d_row[j] = depth[v, margin + j * skip]
+        _project_row(d_row, u_off, v - cy, fx, fy, R, t, origin, res, dmin, dmax, zlo, zhi, nf, xyz, keys)
+        for j in range(nu):
+            k = keys[j]
+            if k < 0:
                 continue
-            xc = (u - cx) * d / fx
-            yc = (v - cy) * d / fy
-            x = R[0, 0] * xc + R[0, 1] * yc + R[0, 2] * d + t[0]
-            y = R[1, 0] * xc + R[1, 1] * yc + R[1, 2] * d + t[1]
-            z = R[2, 0] * xc + R[2, 1] * yc + R[2, 2] * d + t[2]
-            if z < zlo or z > zhi:
-                continue
-            ix = int(np.floor((x - origin[0]) / res))
-            iy = int(np.floor((y - origin[1]) / res))
-            iz = int(np.floor((z - origin[2]) / res))
-            if ix < 0 or iy < 0 or iz < 0 or ix >= n or iy >= n or iz >= n:
-                continue
-            k = (ix * n + iy) * n + iz
             if counts[k] == 0:
                 touched[n_touched] = k
                 n_touched += 1
             counts[k] += 1
-            sums[k, 0] += x
-            sums[k, 1] += y
-            sums[k, 2] += z
+            sums[k, 0] += xyz[0, j]
+            sums[k, 1] += xyz[1, j]
+            sums[k, 2] += xyz[2, j]
     # A voxel's count threshold: fixed, or scaled with the sampling density, which falls with
     # the square of the distance (pixels per voxel face ~ (f res / (skip d))^2).
     keep = np.zeros(n_touched, np.bool_)
