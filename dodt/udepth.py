@@ -108,26 +108,43 @@ def _u_map(half, lo, hi, bw, bins, col_scale, fx, fy, cx, cy, R, t, zlo, zhi):
     """Column histograms of depth; with zlo < zhi, pixels whose world height lies outside
     [zlo, zhi] (the floor, the ceiling) are left out. A pixel's height is linear in its depth:
     z = d (row term + column term) + t_z."""
-    rows, cols = half.shape
+    cols_idx = np.arange(half.shape[1])
+    return _u_map_columns(half, cols_idx, lo, hi, bw, bins, col_scale, fx, fy, cx, cy, R, t, zlo, zhi)
+
+
+@njit(cache=True, nogil=True)
+def _bins_of_row(d_row, row_term, col_term, tz, lo, hi, bw, bins, zlo, zhi, band, out):
+    """The U-map bin of each pixel of one row, -1 for a pixel left out. Branch-free, so that
+    the compiler can vectorise it."""
+    for c in range(d_row.shape[0]):
+        d = d_row[c]
+        z = d * (row_term + col_term[c]) + tz
+        outside = (z < zlo) | (z > zhi)
+        ok = (d > lo) & (d < hi) & ((not band) | (not outside))
+        out[c] = min(np.int64((d - lo) / bw if ok else -1.0), bins - 1)
+
+
+@njit(cache=True, nogil=True)
+def _u_map_columns(depth, cols_idx, lo, hi, bw, bins, col_scale, fx, fy, cx, cy, R, t, zlo, zhi):
+    """_u_map of the image made of the columns ``cols_idx`` of ``depth``, read in place."""
+    rows = depth.shape[0]
+    cols = cols_idx.shape[0]
     U = np.zeros((bins, cols), np.float32)
     band = zlo < zhi
     col_term = np.empty(cols)
     for c in range(cols):
         col_term[c] = R[2, 0] * (c / col_scale - cx) / fx
+    d_row = np.empty(cols)
+    b_row = np.empty(cols, np.int64)
     for r in range(rows):
         row_term = R[2, 1] * (r - cy) / fy + R[2, 2]
         for c in range(cols):
-            d = half[r, c]
-            if d > lo and d < hi:
-                if band:
-                    z = d * (row_term + col_term[c]) + t[2]
-                    if z < zlo or z > zhi:
-                        continue
-                b = int((d - lo) / bw)
-                if b >= bins:
-                    b = bins - 1
-                if U[b, c] < 255.0:  # the reference map saturates at 255 (8-bit)
-                    U[b, c] += 1.0
+            d_row[c] = depth[r, cols_idx[c]]
+        _bins_of_row(d_row, row_term, col_term, t[2], lo, hi, bw, bins, zlo, zhi, band, b_row)
+        for c in range(cols):
+            b = b_row[c]
+            if b >= 0 and U[b, c] < 255.0:  # the reference map saturates at 255 (8-bit)
+                U[b, c] += 1.0
     return U
 
 
@@ -181,14 +198,44 @@ class UDepthDetector:
         self.cfg = cfg
         self.dcfg = depth_cfg
         self.height_band = height_band
+        self._columns: dict[tuple[int, int], np.ndarray | None] = {}  # (H, W) -> _half_columns
 
     def u_map(self, depth_m: np.ndarray, K: CameraIntrinsics | None = None,
               T_world_camera: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
         """(bins, W/2) float32 U-depth map, the bin width [m] and the half-width depth image.
         With K and the pose, the height band (if any) applies."""
+        H, W = depth_m.shape
+        half = cv2.resize(depth_m, (int(W * self.cfg.col_scale), H), interpolation=cv2.INTER_NEAREST)
+        U, bw = self._u_map(depth_m, K, T_world_camera, half)
+        return U, bw, half
+
+    def _half_columns(self, H: int, W: int) -> np.ndarray | None:
+        """The columns of a (H, W) image that cv2.resize's nearest neighbour keeps at the half
+        width (found by resizing an image of column numbers, once per size), or None when the
+        resize does not simply pick columns."""
+        key = (H, W)
+        if key not in self._columns:
+            w = int(W * self.cfg.col_scale)
+            cols = None
+            if 0 < W < 1 << 24:
+                numbers = np.broadcast_to(np.arange(W, dtype=np.float32), (H, W))
+                picked = cv2.resize(np.ascontiguousarray(numbers), (w, H), interpolation=cv2.INTER_NEAREST)
+                if picked.shape == (H, w) and np.all(picked == picked[:1]):
+                    cols = picked[0].astype(np.int64)
+            self._columns[key] = cols
+        return self._columns[key]
+
+    def _u_map(self, depth_m: np.ndarray, K: CameraIntrinsics | None, T_world_camera: np.ndarray | None,
+               half: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """(U-depth map, bin width) as ``u_map``; without ``half`` the half-width image's
+        columns are read from ``depth_m`` in place (the same pixels, no resized copy)."""
         c = self.cfg
         H, W = depth_m.shape
-        half = cv2.resize(depth_m, (int(W * c.col_scale), H), interpolation=cv2.INTER_NEAREST)
+        cols = None
+        if half is None:
+            cols = self._half_columns(H, W)
+            if cols is None:
+                half = cv2.resize(depth_m, (int(W * c.col_scale), H), interpolation=cv2.INTER_NEAREST)
         bins = H // c.row_downsample
         lo, hi = c.min_dist, self.dcfg.depth_max
         bw = math.ceil((hi - lo) * 1000.0 / bins) / 1000.0
@@ -201,13 +248,17 @@ class UDepthDetector:
             R = np.ascontiguousarray(T_world_camera[:3, :3], dtype=np.float64)
             t = np.ascontiguousarray(T_world_camera[:3, 3], dtype=np.float64)
             fx, fy, cx, cy = K.fx, K.fy, K.cx, K.cy
-        U = _u_map(half, lo, hi, bw, bins, float(half.shape[1]) / W, fx, fy, cx, cy, R, t, float(zlo), float(zhi))
+        if cols is not None:
+            U = _u_map_columns(depth_m, cols, lo, hi, bw, bins, float(cols.shape[0]) / W, fx, fy, cx, cy, R, t,
+                               float(zlo), float(zhi))
+        else:
+            U = _u_map(half, lo, hi, bw, bins, float(half.shape[1]) / W, fx, fy, cx, cy, R, t, float(zlo), float(zhi))
         U = cv2.GaussianBlur(U, c.blur_size, c.blur_sigma)
-        return U, bw, half
+        return U, bw
 
     def __call__(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> list[Detection]:
         c = self.cfg
-        U, bw, half = self.u_map(depth_m, K, T_world_camera)
+        U, bw = self._u_map(depth_m, K, T_world_camera)
         rects = _group_lines(U, float(c.threshold_point * c.row_downsample), c.min_line_length)
         dets = []
         H, W = depth_m.shape
