@@ -1,0 +1,189 @@
+"""The compiled fast paths give the values of the plain code they replace, bit for bit."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from numba import njit
+
+from dodt.association import _std_columns
+from dodt.config import DepthConfig, UDepthConfig, VoxelConfig
+from dodt.dbscan import _bounds
+from dodt.frames import CameraIntrinsics
+from dodt.pointcloud import VoxelCloud
+from dodt.udepth import UDepthDetector
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+def test_bounds_are_numpys_min_and_max():
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3, 17, 400, 3000):
+        pts = (rng.normal(0, 3, (n, 3)) + rng.uniform(-20, 20, 3)).astype(np.float32)
+        lo, hi = _bounds(pts)
+        assert _same(lo, pts.min(axis=0).astype(float)) and _same(hi, pts.max(axis=0).astype(float))
+    pts = rng.normal(0, 1, (50, 3)).astype(np.float32)
+    pts[7, 1] = np.nan
+    lo, hi = _bounds(pts)
+    assert _same(lo, pts.min(axis=0).astype(float)) and _same(hi, pts.max(axis=0).astype(float))
+    with pytest.raises(ValueError):
+        _bounds(np.empty((0, 3), np.float32))
+
+
+def test_std_is_numpys():
+    rng = np.random.default_rng(1)
+    for n in (2, 3, 10, 255, 1000, 9000):
+        for scale in (0.01, 1.0, 300.0):
+            pts = (rng.normal(0, scale, (n, 3)) + rng.uniform(-50, 50, 3)).astype(np.float32)
+            assert _same(_std_columns(pts), pts.std(axis=0).astype(float))
+            grid = np.round(pts, 1)  # voxel-centre-like values, many ties
+            assert _same(_std_columns(grid), grid.std(axis=0).astype(float))
+    strided = rng.normal(0, 1, (100, 6)).astype(np.float32)[:, ::2]
+    assert _same(_std_columns(strided), strided.std(axis=0).astype(float))
+    as64 = rng.normal(0, 1, (100, 3))
+    assert _same(_std_columns(as64), as64.std(axis=0).astype(float))
+
+
+@njit(cache=False)
+def _voxel_reference(depth, fx, fy, cx, cy, R, t, margin, skip, dmin, dmax, res, thresh, ref_dist, min_thresh,
+                     zlo, zhi, origin, n):
+    """The voxel filter pixel by pixel, as it was first written (a dict grid)."""
+    H, W = depth.shape
+    order = []
+    counts = {}
+    sums = {}
+    for v in range(margin, H - margin, skip):
+        for u in range(margin, W - margin, skip):
+            d = depth[v, u]
+            if not (d >= dmin and d <= dmax):
+                continue
+            xc = (u - cx) * d / fx
+            yc = (v - cy) * d / fy
+            x = R[0, 0] * xc + R[0, 1] * yc + R[0, 2] * d + t[0]
+            y = R[1, 0] * xc + R[1, 1] * yc + R[1, 2] * d + t[1]
+            z = R[2, 0] * xc + R[2, 1] * yc + R[2, 2] * d + t[2]
+            if z < zlo or z > zhi:
+                continue
+            ix = int(np.floor((x - origin[0]) / res))
+            iy = int(np.floor((y - origin[1]) / res))
+            iz = int(np.floor((z - origin[2]) / res))
+            if ix < 0 or iy < 0 or iz < 0 or ix >= n or iy >= n or iz >= n:
+                continue
+            k = (ix * n + iy) * n + iz
+            if k not in counts:
+                order.append(k)
+                counts[k] = 0
+                sums[k] = (0.0, 0.0, 0.0)
+            counts[k] += 1
+            s = sums[k]
+            sums[k] = (s[0] + x, s[1] + y, s[2] + z)
+    out = []
+    for k in order:
+        c = counts[k]
+        s = sums[k]
+        th = float(thresh)
+        if ref_dist > 0:
+            dx = s[0] / c - t[0]
+            dy = s[1] / c - t[1]
+            dz = s[2] / c - t[2]
+            d2 = dx * dx + dy * dy + dz * dz
+            th = max(float(min_thresh), thresh * ref_dist * ref_dist / max(d2, 1e-6))
+        if c >= th:
+            out.append((np.float32(s[0] / c), np.float32(s[1] / c), np.float32(s[2] / c)))
+    res_ = np.empty((len(out), 3), np.float32)
+    for i in range(len(out)):
+        res_[i, 0], res_[i, 1], res_[i, 2] = out[i]
+    return res_
+
+
+def _pose(rng) -> np.ndarray:
+    yaw, pitch = rng.uniform(-np.pi, np.pi), rng.uniform(-0.3, 0.3)
+    # optical frame: x right, y down, z forward; a camera looking along world +x rotated by yaw
+    base = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    cy_, sy_ = np.cos(yaw), np.sin(yaw)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    Rz = np.array([[cy_, -sy_, 0], [sy_, cy_, 0], [0, 0, 1]])
+    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    T = np.eye(4)
+    T[:3, :3] = Rz @ Ry @ base
+    T[:3, 3] = [rng.uniform(-30, 30), rng.uniform(-30, 30), rng.uniform(0.5, 2.0)]
+    return T
+
+
+def _depth(rng, H, W) -> np.ndarray:
+    d = rng.uniform(0.2, 7.0, (H, W)).astype(np.float32)
+    d[rng.random((H, W)) < 0.1] = 0.0
+    # smooth patches, so that voxels collect many points
+    d[H // 4:H // 2, W // 5:W // 2] = np.float32(rng.uniform(1.0, 5.0))
+    d[rng.random((H, W)) < 0.01] = np.nan
+    return d
+
+
+@pytest.mark.parametrize("H, W, margin, skip", [(480, 640, 10, 2), (120, 161, 3, 3), (64, 90, 0, 1), (40, 30, 20, 2)])
+def test_voxel_cloud_is_the_pixel_loop(H, W, margin, skip):
+    rng = np.random.default_rng(H + W)
+    K = CameraIntrinsics(width=W, height=H, fx=0.6 * W, fy=0.6 * W, cx=W / 2 - 0.3, cy=H / 2 + 0.2)
+    dcfg = DepthConfig(margin=margin, skip=skip)
+    for vcfg in (VoxelConfig(), VoxelConfig(threshold_reference_distance=0.0, occupied_threshold=2)):
+        cloud = VoxelCloud(dcfg, vcfg)
+        for _ in range(3):
+            depth, T = _depth(rng, H, W), _pose(rng)
+            got = cloud(depth, K, T)
+            cam = T[:3, 3]
+            origin = np.floor((cam - vcfg.local_range) / vcfg.resolution) * vcfg.resolution
+            want = _voxel_reference(depth, K.fx, K.fy, K.cx, K.cy, np.ascontiguousarray(T[:3, :3]),
+                                    np.ascontiguousarray(cam), margin, skip, dcfg.depth_min, dcfg.depth_max,
+                                    vcfg.resolution, vcfg.occupied_threshold, vcfg.threshold_reference_distance,
+                                    vcfg.min_occupied_threshold, vcfg.ground_height, vcfg.ceiling_height, origin,
+                                    cloud.n)
+            assert _same(got, want)
+
+
+@njit(cache=False)
+def _u_map_reference(half, lo, hi, bw, bins, col_scale, fx, fy, cx, cy, R, t, zlo, zhi):
+    """The U-depth map pixel by pixel, as it was first written."""
+    rows, cols = half.shape
+    U = np.zeros((bins, cols), np.float32)
+    band = zlo < zhi
+    for r in range(rows):
+        for c in range(cols):
+            d = half[r, c]
+            if d > lo and d < hi:
+                if band:
+                    z = d * (R[2, 1] * (r - cy) / fy + R[2, 2] + R[2, 0] * (c / col_scale - cx) / fx) + t[2]
+                    if z < zlo or z > zhi:
+                        continue
+                b = int((d - lo) / bw)
+                if b >= bins:
+                    b = bins - 1
+                if U[b, c] < 255.0:
+                    U[b, c] += 1.0
+    return U
+
+
+@pytest.mark.parametrize("H, W", [(480, 640), (121, 333), (48, 64)])
+@pytest.mark.parametrize("col_scale", [0.5, 0.4])
+@pytest.mark.parametrize("height_filter", [True, False])
+def test_u_map_read_in_place_is_the_resized_one(H, W, col_scale, height_filter):
+    rng = np.random.default_rng(W)
+    K = CameraIntrinsics(width=W, height=H, fx=0.6 * W, fy=0.6 * W, cx=W / 2 - 0.3, cy=H / 2 + 0.2)
+    det = UDepthDetector(UDepthConfig(col_scale=col_scale, height_filter=height_filter), DepthConfig(),
+                         (0.2, 2.8))
+    for _ in range(3):
+        depth, T = _depth(rng, H, W), _pose(rng)
+        U_resized, bw, half = det.u_map(depth, K, T)
+        U_in_place, bw2 = det._u_map(depth, K, T)
+        assert half.shape == (H, int(W * col_scale)) and bw == bw2
+        assert _same(U_in_place, U_resized)
+        c = det.cfg
+        if height_filter:
+            R, t, f, cx, cy = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), K.fx, K.cx, K.cy
+            zlo, zhi = 0.2, 2.8
+        else:
+            R, t, f, cx, cy, zlo, zhi = np.eye(3), np.zeros(3), 1.0, 0.0, 0.0, 0.0, 0.0
+        U = _u_map_reference(half, c.min_dist, 5.5, bw, H // c.row_downsample, half.shape[1] / W, f, f, cx, cy,
+                             R, t, zlo, zhi)
+        assert _same(U_in_place, cv2.GaussianBlur(U, c.blur_size, c.blur_sigma))
