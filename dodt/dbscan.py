@@ -317,28 +317,81 @@ def split_parts(points: np.ndarray, cfg: DBSCANConfig) -> list[np.ndarray]:
     return [np.flatnonzero(labels == p) for p in range(n_parts)]
 
 
+@njit(cache=True, nogil=True)
+def _cluster_parts(points, labels, split_width, split_bin, valley_ratio, min_bins, min_points, max_depth, min_size_xy):
+    """The parts of every cluster (clusters by label, each cluster's points in index order, its
+    parts as split_parts gives them) and their boxes: (the parts' points one after another,
+    offsets (P + 1,), lower corners (P, 3), upper corners (P, 3)); the boxes at least
+    ``min_size_xy`` wide, grown about their middle."""
+    n = labels.shape[0]
+    n_clusters = 0
+    for i in range(n):
+        if labels[i] + 1 > n_clusters:
+            n_clusters = labels[i] + 1
+    start = np.zeros(n_clusters + 1, np.int64)
+    for i in range(n):
+        if labels[i] >= 0:
+            start[labels[i] + 1] += 1
+    for c in range(n_clusters):
+        start[c + 1] += start[c]
+    order = np.empty(start[n_clusters], np.int64)
+    fill = start[:-1].copy()
+    for i in range(n):
+        if labels[i] >= 0:
+            order[fill[labels[i]]] = i
+            fill[labels[i]] += 1
+    out = np.empty((start[n_clusters], 3), points.dtype)
+    offsets = [0]
+    los = []
+    his = []
+    m = 0
+    for c in range(n_clusters):
+        cluster = points[order[start[c]:start[c + 1]]]
+        xy = np.empty((cluster.shape[0], 2))
+        for i in range(cluster.shape[0]):
+            xy[i, 0] = cluster[i, 0]
+            xy[i, 1] = cluster[i, 1]
+        part = _split_parts(xy, split_width, split_bin, valley_ratio, min_bins, min_points, max_depth)
+        n_parts = part.max() + 1 if part.shape[0] else 0
+        for p in range(n_parts):
+            m0 = m
+            for i in range(part.shape[0]):
+                if part[i] == p:
+                    out[m] = cluster[i]
+                    m += 1
+            lo, hi = _bounds(out[m0:m])
+            for a in range(2):
+                g = min_size_xy - (hi[a] - lo[a])
+                if not (g >= 0.0 or g != g):  # np.maximum(g, 0.0)
+                    g = 0.0
+                g = g / 2
+                lo[a] -= g
+                hi[a] += g
+            offsets.append(m)
+            los.append(lo)
+            his.append(hi)
+    n_out = len(los)
+    lo_all = np.empty((n_out, 3))
+    hi_all = np.empty((n_out, 3))
+    for k in range(n_out):
+        lo_all[k] = los[k]
+        hi_all[k] = his[k]
+    return out[:m], np.array(offsets), lo_all, hi_all
+
+
 class DBSCANDetector:
     def __init__(self, cfg: DBSCANConfig):
         self.cfg = cfg
 
     def __call__(self, points: np.ndarray) -> list[Detection]:
         labels = dbscan_labels(points, self.cfg.eps, self.cfg.min_points)
-        dets = []
         if labels.size == 0 or labels.max() < 0:
-            return dets
-        order = np.argsort(labels, kind="stable")
-        sl = labels[order]
-        starts = np.searchsorted(sl, np.arange(sl.max() + 1))
-        ends = np.append(starts[1:], len(sl))
-        for s, e in zip(starts, ends):
-            if e <= s or sl[s] < 0:
-                continue
-            cluster = points[order[s:e]]
-            for part in split_parts(cluster, self.cfg):
-                pts = cluster[part]
-                lo, hi = _bounds(pts)
-                grow = np.maximum(self.cfg.min_size_xy - (hi - lo)[:2], 0.0) / 2
-                lo[:2] -= grow
-                hi[:2] += grow
-                dets.append(Detection.from_bounds(lo, hi, "dbscan", pts))
-        return dets
+            return []
+        c = self.cfg
+        # every cluster in label order, cut into its parts (split_parts), each part's box
+        pts, offsets, lo, hi = _cluster_parts(
+            np.asarray(points).reshape(-1, 3), labels, float(c.split_width), float(c.split_bin),
+            float(c.split_valley_ratio), int(np.ceil(c.split_min_part / c.split_bin)), int(c.min_points), 4,
+            float(c.min_size_xy))
+        return [Detection.from_bounds(lo[k], hi[k], "dbscan", pts[offsets[k]:offsets[k + 1]].copy())
+                for k in range(len(lo))]
