@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dodt.association import TrackView, assign, features, similarity_matrix
+from dodt.association import TrackView, assign, features, mean_columns, similarity_matrix
 from dodt.config import DODTConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics
@@ -42,8 +42,9 @@ def _anchor(det: Detection, source: str) -> np.ndarray:
     """The horizontal point the filter measures: the box centre, or the mean or median of the
     obstacle's points (steadier: swinging limbs move the box more than the body)."""
     if source in ("mean", "median") and len(det.points) >= 10:
-        xy = det.points[:, :2]
-        return (np.mean(xy, axis=0) if source == "mean" else np.median(xy, axis=0)).astype(float)
+        if source == "mean":
+            return mean_columns(det.points, 2).astype(float)
+        return np.median(det.points[:, :2], axis=0).astype(float)
     return det.center[:2].astype(float)
 
 
@@ -68,8 +69,11 @@ class Track:
         self.observations.append(_Observation(seq, stamp, anchor.copy(), None, det.source == "learned"))
         self.clouds: deque[tuple[int, float, np.ndarray]] = deque()  # (seq, stamp, points) to vote with
         self.clouds.append((seq, stamp, det.points))
-        self.history: deque[tuple[float, float, float, float]] = deque()  # over track.output_history
-        self.history.append((stamp, float(det.center[0]), float(det.center[1]), self.z))
+        # [t, x, y, z] centres over track.output_history: rows _h0 .. _h1 - 1 of a buffer that
+        # grows as needed (the output copies them at once)
+        self._hist = np.empty((16, 4))
+        self._h0 = self._h1 = 0
+        self.add_history(stamp, float(det.center[0]), float(det.center[1]), self.z)
         self.candidates: deque[bool] = deque()  # of the frames with a detection
         self.dynamic_history: deque[bool] = deque()  # the geometric label of every frame
         self.geometric_dynamic = False  # the label from speed and point voting alone
@@ -82,6 +86,27 @@ class Track:
         self.coasting = False
         self.missed = 0  # consecutive frames without a detection
         self.headings: deque[tuple[float, float]] = deque()  # (stamp, heading of the pseudo-measured velocity)
+
+    @property
+    def history(self) -> list[tuple[float, float, float, float]]:
+        """The kept (t, x, y, z) centres, oldest first."""
+        return [tuple(float(v) for v in row) for row in self._hist[self._h0:self._h1]]
+
+    def add_history(self, stamp: float, x: float, y: float, z: float) -> None:
+        if self._h1 == len(self._hist):
+            n = self._h1 - self._h0
+            buf = self._hist if 2 * n <= len(self._hist) else np.empty((2 * len(self._hist), 4))
+            buf[:n] = self._hist[self._h0:self._h1]
+            self._hist, self._h0, self._h1 = buf, 0, n
+        self._hist[self._h1] = (stamp, x, y, z)
+        self._h1 += 1
+
+    def trim_history(self, oldest: float) -> None:
+        """Drop the centres from before ``oldest``, from the front (the newest stays)."""
+        while self._hist[self._h0, 0] < oldest:
+            self._h0 += 1
+            if self._h0 == self._h1:
+                raise IndexError("the track's whole history is older than its window")
 
     @property
     def is_person(self) -> bool:
@@ -218,7 +243,7 @@ class Track:
             cloud_then = clouds(o_seq) if T_then is not None else None
             if cloud_then is not None and len(cloud_then) and len(o_pts) and len(cur_pts):
                 dt = cur_t - o_t
-                v_box = (np.mean(cur_pts, axis=0) - np.mean(o_pts, axis=0)) / max(dt, 1e-6)
+                v_box = (mean_columns(cur_pts) - mean_columns(o_pts)) / max(dt, 1e-6)
                 voters = cur_pts
                 if 0 < cfg.max_vote_points < len(cur_pts):  # an even sample of a large obstacle
                     voters = cur_pts[::-(-len(cur_pts) // cfg.max_vote_points)]
@@ -260,7 +285,9 @@ class Track:
         """The track as reported. A track identified static reports zero velocity and acceleration:
         its filter's velocity is then mostly the drift of a box whose visible part changes as the
         camera moves, not motion; ``filter_velocity`` and ``filter_acceleration`` keep them."""
-        h = [e for e in self.history if e[0] >= stamp - self.cfg.track.output_history]
+        h = self._hist[self._h0:self._h1]
+        recent = h[:, 0] >= stamp - self.cfg.track.output_history
+        h = h.copy() if recent.all() else h[recent]
         dynamic = self.dynamic
         v = np.array([self.kf.velocity[0], self.kf.velocity[1], 0.0])
         a = np.array([self.kf.acceleration[0], self.kf.acceleration[1], 0.0])
@@ -268,7 +295,7 @@ class Track:
             id=self.id, center=self.center, size=self.size.copy(),
             velocity=v if dynamic else np.zeros(3), acceleration=a if dynamic else np.zeros(3),
             dynamic=dynamic, coasting=self.coasting, age=stamp - self.born,
-            history=np.array(h, float).reshape(-1, 4), is_person=self.is_person,
+            history=h, is_person=self.is_person,
             position_std=float(np.sqrt(self.kf.position_variance)), filter_velocity=v, filter_acceleration=a)
 
 
@@ -408,9 +435,8 @@ class Tracker:
                 tr.missed += 1
             survivors.append(tr)
             c = tr.center_xy
-            tr.history.append((stamp, float(c[0]), float(c[1]), tr.z))
-            while tr.history[0][0] < stamp - self.cfg.track.output_history:
-                tr.history.popleft()
+            tr.add_history(stamp, float(c[0]), float(c[1]), tr.z)
+            tr.trim_history(stamp - self.cfg.track.output_history)
         for di, det in enumerate(dets):
             if di not in matched_d:
                 survivors.append(Track(self._next_id, det, seq, stamp, self.cfg, self.clock))

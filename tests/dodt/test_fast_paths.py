@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from dodt.association import _std_columns
+from dodt.association import _std_columns, mean_columns
 from dodt.config import DepthConfig, UDepthConfig, VoxelConfig
 from dodt.dbscan import _bounds
 from dodt.frames import CameraIntrinsics
@@ -45,6 +45,18 @@ def test_std_is_numpys():
     assert _same(_std_columns(strided), strided.std(axis=0).astype(float))
     as64 = rng.normal(0, 1, (100, 3))
     assert _same(_std_columns(as64), as64.std(axis=0).astype(float))
+
+
+def test_column_means_are_numpys():
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 9, 200, 1500, 12000):
+        for scale in (0.05, 2.0, 500.0):
+            pts = (rng.normal(0, scale, (n, 3)) + rng.uniform(-60, 60, 3)).astype(np.float32)
+            assert _same(mean_columns(pts), np.mean(pts, axis=0))
+            assert _same(mean_columns(pts, 2), np.mean(pts[:, :2], axis=0))
+            assert _same(mean_columns(pts, 2).astype(float), np.mean(pts[:, :2], axis=0).astype(float))
+    as64 = rng.normal(0, 1, (100, 3))
+    assert _same(mean_columns(as64, 2), np.mean(as64[:, :2], axis=0))
 
 
 @njit(cache=False)
