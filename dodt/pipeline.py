@@ -40,6 +40,12 @@ from dodt.udepth import UDepthDetector
 MODULES = ("point_cloud", "udepth", "dbscan", "ensemble", "learned", "association", "kalman", "identification")
 
 
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+_LAST_ROW_TOL = 1e-8 + 1e-5 * np.abs(_LAST_ROW)
+_EYE3 = np.eye(3)
+_EYE3_TOL = 1e-3 + 1e-5 * np.abs(_EYE3)
+
+
 def validate_frame(frame: SensorFrame) -> None:
     """Raise ValueError for malformed frames (a programming or configuration error)."""
     d = frame.depth
@@ -69,12 +75,16 @@ def validate_frame(frame: SensorFrame) -> None:
     T = np.asarray(frame.T_world_camera)
     if T.shape != (4, 4):
         raise ValueError(f"T_world_camera must be 4x4, got shape {T.shape}")
-    if np.all(np.isfinite(T)):  # a non-finite pose is bad data (skipped and counted), not an error
-        if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+    if np.isfinite(T).all():  # a non-finite pose is bad data (skipped and counted), not an error
+        # np.allclose's test (|a - b| <= atol + rtol |b|, rtol 1e-5) against precomputed bounds
+        if not (np.abs(T[3] - _LAST_ROW) <= _LAST_ROW_TOL).all():
             raise ValueError(f"T_world_camera's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
-        if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-3):
+        R = T[:3, :3]
+        if not (np.abs(R @ R.T - _EYE3) <= _EYE3_TOL).all():
             raise ValueError("T_world_camera's rotation is not orthonormal")
-        if np.linalg.det(T[:3, :3]) < 0:
+        # near-orthonormal here: the determinant is about +-1, its sign that of the triple product
+        (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+        if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0:
             raise ValueError("T_world_camera's rotation has determinant -1: a reflection, not a rotation "
                              "(a left-handed camera or world frame?)")
 

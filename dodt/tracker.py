@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from itertools import islice
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,8 +113,9 @@ class Track:
     def is_person(self) -> bool:
         """person_fraction of the votes over learned.person_span (3 at 30 Hz) were person boxes."""
         n = self.clock.intervals(self.cfg.learned.person_span) + 1
-        return len(self.person_votes) >= n and \
-            sum(list(self.person_votes)[-n:]) >= self.cfg.learned.person_fraction * n - 1e-9
+        votes = self.person_votes
+        return len(votes) >= n and \
+            sum(islice(votes, len(votes) - n, None)) >= self.cfg.learned.person_fraction * n - 1e-9
 
     @property
     def dynamic(self) -> bool:
@@ -127,7 +129,10 @@ class Track:
     @property
     def center(self) -> np.ndarray:
         """The 3D centre: x, y filtered, z from the latest detection (a new array)."""
-        return np.array([*self.center_xy, self.z])
+        c = np.empty(3)
+        np.add(self.kf.position, self.offset, out=c[:2])
+        c[2] = self.z
+        return c
 
     @property
     def half_width(self) -> float:
@@ -288,14 +293,17 @@ class Track:
         h = self._hist[self._h0:self._h1]
         recent = h[:, 0] >= stamp - self.cfg.track.output_history
         h = h.copy() if recent.all() else h[recent]
-        dynamic = self.dynamic
-        v = np.array([self.kf.velocity[0], self.kf.velocity[1], 0.0])
-        a = np.array([self.kf.acceleration[0], self.kf.acceleration[1], 0.0])
+        person = self.is_person
+        dynamic = bool(person or self.geometric_dynamic)  # self.dynamic
+        v = np.zeros(3)
+        v[:2] = self.kf.velocity
+        a = np.zeros(3)
+        a[:2] = self.kf.acceleration
         return TrackedObstacle(
             id=self.id, center=self.center, size=self.size.copy(),
             velocity=v if dynamic else np.zeros(3), acceleration=a if dynamic else np.zeros(3),
             dynamic=dynamic, coasting=self.coasting, age=stamp - self.born,
-            history=h, is_person=self.is_person,
+            history=h, is_person=person,
             position_std=float(np.sqrt(self.kf.position_variance)), filter_velocity=v, filter_acceleration=a)
 
 

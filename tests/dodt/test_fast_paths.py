@@ -199,3 +199,49 @@ def test_u_map_read_in_place_is_the_resized_one(H, W, col_scale, height_filter):
         U = _u_map_reference(half, c.min_dist, 5.5, bw, H // c.row_downsample, half.shape[1] / W, f, f, cx, cy,
                              R, t, zlo, zhi)
         assert _same(U_in_place, cv2.GaussianBlur(U, c.blur_size, c.blur_sigma))
+
+
+def _validate_reference(T: np.ndarray) -> str | None:
+    """The pose checks with np.allclose and np.linalg.det, as first written."""
+    if np.all(np.isfinite(T)):
+        if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+            return "last row"
+        if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-3):
+            return "orthonormal"
+        if np.linalg.det(T[:3, :3]) < 0:
+            return "determinant"
+    return None
+
+
+def test_pose_checks_decide_as_allclose_and_det():
+    from dodt.frames import SensorFrame
+    from dodt.pipeline import validate_frame
+
+    rng = np.random.default_rng(3)
+    K = CameraIntrinsics(width=32, height=24, fx=20.0, fy=20.0, cx=16.0, cy=12.0)
+    depth = np.ones((24, 32), np.float32)
+    seen = set()
+    for i in range(3000):
+        T = _pose(rng)
+        kind = i % 6
+        if kind == 1:
+            T[3, rng.integers(4)] += rng.choice([1e-9, 5e-9, 1.5e-8, 1e-6, -2e-5])
+        elif kind == 2:
+            T[:3, :3] += rng.normal(0, rng.choice([1e-4, 3e-4, 6e-4, 1e-3]), (3, 3))
+        elif kind == 3:
+            T[:3, :3] = T[:3, :3] @ np.diag([1.0, -1.0, 1.0])
+        elif kind == 4:
+            T[rng.integers(4), rng.integers(4)] = rng.choice([np.nan, np.inf])
+        elif kind == 5:
+            T = T.astype(np.float32)
+        want = _validate_reference(T)
+        try:
+            validate_frame(SensorFrame(depth=depth, color=None, intrinsics=K, T_world_camera=T, stamp=0.0))
+            got = None
+        except ValueError as e:
+            msg = str(e)
+            got = "last row" if "last row" in msg else "orthonormal" if "orthonormal" in msg else \
+                "determinant" if "determinant" in msg else msg
+        assert got == want
+        seen.add(want)
+    assert seen == {None, "last row", "orthonormal", "determinant"}
