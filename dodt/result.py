@@ -6,6 +6,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+def _rounded(a) -> list[float]:
+    """The values as floats rounded to 4 decimals (a float array's tolist() gives the floats at once)."""
+    if isinstance(a, np.ndarray) and a.dtype.kind == "f":
+        return [round(x, 4) for x in a.tolist()]
+    return [round(float(x), 4) for x in a]
+
+
 @dataclass(frozen=True, eq=False)
 class TrackedObstacle:
     id: int
@@ -27,7 +34,7 @@ class TrackedObstacle:
     filter_acceleration: np.ndarray | None = None
 
     def to_json(self) -> dict:
-        r = lambda a: [round(float(x), 4) for x in a]  # noqa: E731
+        r = _rounded
         return {"id": self.id, "center": r(self.center), "size": r(self.size), "velocity": r(self.velocity),
                 "acceleration": r(self.acceleration), "dynamic": self.dynamic, "coasting": self.coasting,
                 "age": round(self.age, 3), "is_person": self.is_person,

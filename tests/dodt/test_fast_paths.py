@@ -245,3 +245,18 @@ def test_pose_checks_decide_as_allclose_and_det():
         assert got == want
         seen.add(want)
     assert seen == {None, "last row", "orthonormal", "determinant"}
+
+
+def test_json_rounding_is_round_of_float():
+    import json
+
+    from dodt.result import _rounded
+
+    rng = np.random.default_rng(4)
+    for dtype in (np.float64, np.float32, np.int64):
+        for _ in range(500):
+            a = (rng.normal(0, 10, 3) * 10 ** rng.uniform(-6, 3)).astype(dtype)
+            assert json.dumps(_rounded(a)) == json.dumps([round(float(x), 4) for x in a])
+    special = np.array([np.nan, np.inf, -0.0, 0.00005, -0.00015])
+    assert json.dumps(_rounded(special)) == json.dumps([round(float(x), 4) for x in special])
+    assert _rounded([1, 2.5]) == [1.0, 2.5]
