@@ -20,6 +20,7 @@ obstacle dynamic.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from dodt.config import IdentificationConfig
@@ -34,6 +35,49 @@ def match_reach(dt: float, cfg: IdentificationConfig) -> float:
     return cfg.max_point_speed * dt + 0.1
 
 
+_BRUTE_FORCE_PAIRS = 20000  # vote: below this many (point, cloud point) pairs, no k-d tree
+
+
+@njit(cache=True, nogil=True)
+def _nearest(points, data, reach):
+    """Each point's nearest neighbour in data (M, 3) float64: (distance, index, tie). The squared
+    distance is summed over x, y, z in that order from the float64 coordinates, as
+    scipy's cKDTree does, so the distances are the tree's. Beyond ``reach`` the answer is
+    (inf, M); tie: a point within reach has two nearest neighbours at the same distance."""
+    n = points.shape[0]
+    m = data.shape[0]
+    dist = np.empty(n)
+    idx = np.empty(n, np.int64)
+    tie = False
+    for i in range(n):
+        x0 = np.float64(points[i, 0])
+        x1 = np.float64(points[i, 1])
+        x2 = np.float64(points[i, 2])
+        best = np.inf
+        best_j = m
+        tied = False
+        for j in range(m):
+            d0 = x0 - data[j, 0]
+            d1 = x1 - data[j, 1]
+            d2 = x2 - data[j, 2]
+            s = d0 * d0 + d1 * d1 + d2 * d2
+            if s < best:
+                best = s
+                best_j = j
+                tied = False
+            elif s == best:
+                tied = True
+        d = np.sqrt(best)
+        if d <= reach:
+            dist[i] = d
+            idx[i] = best_j
+            tie = tie or tied
+        else:
+            dist[i] = np.inf
+            idx[i] = m
+    return dist, idx, tie
+
+
 def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_world_camera_then,
          K: CameraIntrinsics, max_depth: float, cfg: IdentificationConfig) -> tuple[int, int, int]:
     """(votes, valid, skipped) of the point voting.
@@ -45,9 +89,14 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     its points find their unmoved twins wherever they were.
     """
     n = len(points_now)
-    if not isinstance(cloud_then, cKDTree):
-        cloud_then = cKDTree(np.asarray(cloud_then).reshape(-1, 3)) if len(cloud_then) else None
-    if n == 0 or cloud_then is None or dt <= 0:
+    tree = cloud_then if isinstance(cloud_then, cKDTree) else None
+    if tree is not None:
+        data = tree.data
+    else:
+        data = np.ascontiguousarray(np.asarray(cloud_then).reshape(-1, 3), dtype=np.float64)
+        if not len(data):
+            data = None
+    if n == 0 or data is None or dt <= 0:
         return 0, 0, n
     # In view back then, and not at the edge of the depth range, where the filtered cloud thins out.
     seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth - cfg.range_margin, margin_px=cfg.fov_margin_px)
@@ -55,9 +104,19 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     # was not in the cloud back then (occluded, too sparse, out of range). The search stops at
     # that bound (much faster); beyond it the tree answers distance inf and index M.
     reach = match_reach(dt, cfg)
-    dist, idx = cloud_then.query(points_now, distance_upper_bound=reach * (1 + 1e-9))
+    dist = idx = None
+    if tree is None and n * len(data) <= _BRUTE_FORCE_PAIRS:
+        # few pairs: every distance, as the tree computes it, instead of building the tree; a tie
+        # for the nearest (which the tree may break otherwise) sends the query to the tree
+        dist, idx, tie = _nearest(np.ascontiguousarray(points_now), data, reach)
+        if tie:
+            dist = idx = None
+    if dist is None:
+        if tree is None:
+            tree = cKDTree(data)
+        dist, idx = tree.query(points_now, distance_upper_bound=reach * (1 + 1e-9))
     seen &= dist <= reach
-    v = (points_now - cloud_then.data[np.minimum(idx, cloud_then.n - 1)])[:, :2] / dt
+    v = (points_now - data[np.minimum(idx, len(data) - 1)])[:, :2] / dt
     vb = v_box[:2]
     agree = (v @ vb) > 0 if np.linalg.norm(vb) > 1e-9 else np.ones(n, bool)
     valid = seen & agree

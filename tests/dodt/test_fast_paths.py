@@ -260,3 +260,40 @@ def test_json_rounding_is_round_of_float():
     special = np.array([np.nan, np.inf, -0.0, 0.00005, -0.00015])
     assert json.dumps(_rounded(special)) == json.dumps([round(float(x), 4) for x in special])
     assert _rounded([1, 2.5]) == [1.0, 2.5]
+
+
+def test_vote_without_tree_is_the_trees():
+    from scipy.spatial import cKDTree
+
+    from dodt.config import IdentificationConfig
+    from dodt.identification import _nearest, vote
+
+    rng = np.random.default_rng(5)
+    cfg = IdentificationConfig()
+    K = CameraIntrinsics()
+    for trial in range(400):
+        T = _pose(rng)
+        ahead = T[:3, 3] + T[:3, 2] * rng.uniform(1.0, 4.0)
+        m = int(rng.integers(1, 200))
+        then = (ahead + rng.normal(0, 0.4, (m, 3))).astype(np.float32)
+        if trial % 4 == 0:
+            then = np.round(then, 1)  # a lattice: many equal distances
+        if trial % 5 == 0:
+            then = np.concatenate([then, then[:3]])  # duplicates: ties for the nearest
+        n = int(rng.integers(1, 120))
+        now = (then[rng.integers(0, len(then), n)] + rng.normal(0.02, 0.05, (n, 3))).astype(np.float32)
+        if trial % 3 == 0:
+            now = now[::2]  # a strided view, as the voters are
+        v_box = rng.normal(0, 1, 3).astype(np.float32)
+        dt = float(rng.choice([1 / 30, 5 / 30, 0.2]))
+        got = vote(now, then, dt, v_box, T, K, 5.5, cfg)
+        want = vote(now, cKDTree(then), dt, v_box, T, K, 5.5, cfg)
+        assert got == want
+        tree = cKDTree(then)
+        reach = 0.3
+        dist, idx, tie = _nearest(np.ascontiguousarray(now), tree.data, reach)
+        td, ti = tree.query(now, distance_upper_bound=reach * (1 + 1e-9))
+        ok = td <= reach
+        assert _same(dist[ok], td[ok]) and np.all(np.isinf(dist[~ok]))
+        if not tie:
+            assert _same(idx[ok], ti[ok])
