@@ -149,6 +149,51 @@ def _u_map_columns(depth, cols_idx, lo, hi, bw, bins, col_scale, fx, fy, cx, cy,
 
 
 @njit(cache=True, nogil=True)
+def _kth_smallest(a, k):
+    """np.partition(a, k)[k], the k-th smallest value (0-based), for k near either end of a
+    (a percentile of a few per cent) from a part of a: a threshold t is read off a small sorted
+    sample so that the values <= t (or >= t) hold the k-th smallest; when they do (counted, not
+    assumed), it is selected among them, else (and for an array with NaN) in the whole array."""
+    n = a.shape[0]
+    if n < 128 or k < 0 or k >= n or 4 * min(k + 1, n - k) > n:
+        return np.partition(a, k)[k]
+    s = 32
+    stride = n // s
+    sample = np.empty(s)
+    for i in range(s):
+        sample[i] = a[i * stride]
+    sample.sort()
+    part = np.empty(n)
+    m = 0
+    nan = False
+    if 2 * k < n:
+        # the values <= t: the k-th smallest is among them once there are k + 1 of them
+        t = sample[min((k + 1) * s // n + 4, s - 1)]
+        for i in range(n):
+            x = a[i]
+            part[m] = x
+            m += x <= t
+            nan |= x != x
+        if nan or m < k + 1:
+            return np.partition(a, k)[k]
+        r = np.partition(part[:m], k)[k]
+    else:
+        # the values >= t: with at most k values below t, the k-th smallest is among them, at k - below
+        t = sample[max(k * s // n - 4, 0)]
+        for i in range(n):
+            x = a[i]
+            part[m] = x
+            m += x >= t
+            nan |= x != x
+        below = n - m
+        if nan or below > k:
+            return np.partition(a, k)[k]
+        r = np.partition(part[:m], k - below)[k - below]
+    # equal values are the same value, but for -0.0 and 0.0, which np.partition may order otherwise
+    return np.partition(a, k)[k] if r == 0.0 else r
+
+
+@njit(cache=True, nogil=True)
 def _box_points(depth, u0, u1, near, far, run_len, margin, step, fx, fy, cx, cy, R, t, q):
     """Pixels of columns [u0, u1) whose depth lies in [near, far] within vertical runs of at
     least run_len rows; every step-th of them back-projected to the world. Returns (n, lo, hi)
@@ -185,8 +230,8 @@ def _box_points(depth, u0, u1, near, far, run_len, margin, step, fx, fy, cx, cy,
     k_lo = int(q / 100.0 * (n - 1))
     k_hi = int((100.0 - q) / 100.0 * (n - 1))
     for a, arr in enumerate((xs[:n], ys[:n], zs[:n])):
-        lo[a] = np.partition(arr, k_lo)[k_lo]
-        hi[a] = np.partition(arr, k_hi)[k_hi]
+        lo[a] = _kth_smallest(arr, k_lo)
+        hi[a] = _kth_smallest(arr, k_hi)
     return n, lo, hi
 
 

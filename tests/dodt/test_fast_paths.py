@@ -297,3 +297,29 @@ def test_vote_without_tree_is_the_trees():
         assert _same(dist[ok], td[ok]) and np.all(np.isinf(dist[~ok]))
         if not tie:
             assert _same(idx[ok], ti[ok])
+
+
+@njit(cache=False)
+def _partition_kth(a, k):
+    return np.partition(a, k)[k]  # numba's np.partition, as _box_points called it
+
+
+def test_kth_smallest_is_partitions():
+    from dodt.udepth import _kth_smallest
+
+    rng = np.random.default_rng(6)
+    for trial in range(3000):
+        n = int(rng.integers(1, 3000))
+        kind = trial % 5
+        a = rng.normal(0, 1, n)
+        if kind == 1:
+            a = np.round(a * 3) / 3  # many ties, -0.0 and 0.0 among them
+        elif kind == 2:
+            a = np.sort(a)
+        elif kind == 3:
+            a = np.sort(a)[::-1].copy()
+        elif kind == 4:
+            a[rng.integers(0, n, 1 + n // 50)] = np.nan
+        q = float(rng.choice([0.0, 0.5, 2.0, 5.0, 20.0, 30.0, 50.0]))
+        for k in (int(q / 100.0 * (n - 1)), int((100.0 - q) / 100.0 * (n - 1))):
+            assert _same(np.float64(_kth_smallest(a, k)), np.float64(_partition_kth(a, k)))
