@@ -235,6 +235,36 @@ def _box_points(depth, u0, u1, near, far, run_len, margin, step, fx, fy, cx, cy,
     return n, lo, hi
 
 
+@njit(cache=True, nogil=True)
+def _rect_boxes(depth, rects, bw, min_area, min_dist, occlusion_factor, col_scale, margin, run_len, fx, fy, cx,
+                cy, R, t, q):
+    """_box_points of each U-map rectangle (left, right, first bin, last bin): its columns of the
+    image between its near and far depth. Returns (n, lo, hi) per rectangle, n = 0 for one too
+    small or without columns."""
+    H, W = depth.shape
+    m = rects.shape[0]
+    n_out = np.zeros(m, np.int64)
+    lo_out = np.zeros((m, 3))
+    hi_out = np.zeros((m, 3))
+    for i in range(m):
+        left, right, b0, b1 = rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3]
+        if (right - left) * (b1 - b0) < min_area:
+            continue
+        near = b0 * bw + min_dist
+        far = near + occlusion_factor * (b1 - b0 + 1) * bw
+        u0 = max(int(left / col_scale), margin)
+        u1 = min(int((right + 1) / col_scale), W - margin)
+        if u1 <= u0:
+            continue
+        # sample about 3000 pixels at most: wide boxes (walls) would cost milliseconds
+        step = max(2, int(math.sqrt((u1 - u0) * H / 3000.0)) + 1)
+        n, lo, hi = _box_points(depth, u0, u1, near, far, run_len, margin, step, fx, fy, cx, cy, R, t, q)
+        n_out[i] = n
+        lo_out[i] = lo
+        hi_out[i] = hi
+    return n_out, lo_out, hi_out
+
+
 class UDepthDetector:
     def __init__(self, cfg: UDepthConfig, depth_cfg: DepthConfig, height_band: tuple[float, float] | None = None):
         """``height_band``: (floor, ceiling) world heights [m]; pixels outside it stay out of the
@@ -305,26 +335,11 @@ class UDepthDetector:
         c = self.cfg
         U, bw = self._u_map(depth_m, K, T_world_camera)
         rects = _group_lines(U, float(c.threshold_point * c.row_downsample), c.min_line_length)
-        dets = []
-        H, W = depth_m.shape
         R = np.ascontiguousarray(T_world_camera[:3, :3], dtype=np.float64)
         t = np.ascontiguousarray(T_world_camera[:3, 3], dtype=np.float64)
-        margin = self.dcfg.margin
         depth_m = np.ascontiguousarray(depth_m, dtype=np.float32)
-        for left, right, b0, b1 in rects:
-            if (right - left) * (b1 - b0) < c.min_area:
-                continue
-            near = b0 * bw + c.min_dist
-            far = near + c.occlusion_factor * (b1 - b0 + 1) * bw
-            u0 = max(int(left / c.col_scale), margin)
-            u1 = min(int((right + 1) / c.col_scale), W - margin)
-            if u1 <= u0:
-                continue
-            # sample about 3000 pixels at most: wide boxes (walls) would cost milliseconds
-            step = max(2, int(math.sqrt((u1 - u0) * H / 3000.0)) + 1)
-            n, lo, hi = _box_points(depth_m, u0, u1, near, far, c.continuity_rows + 1, margin, step,
-                                    K.fx, K.fy, K.cx, K.cy, R, t, c.extent_percentile)
-            if n < 20 or hi[2] - lo[2] < c.min_height:
-                continue
-            dets.append(Detection.from_bounds(lo, hi, "udepth"))
-        return dets
+        n, lo, hi = _rect_boxes(depth_m, rects, bw, c.min_area, c.min_dist, c.occlusion_factor, c.col_scale,
+                                self.dcfg.margin, c.continuity_rows + 1, K.fx, K.fy, K.cx, K.cy, R, t,
+                                c.extent_percentile)
+        return [Detection.from_bounds(lo[i], hi[i], "udepth") for i in range(len(rects))
+                if not (n[i] < 20 or hi[i, 2] - lo[i, 2] < c.min_height)]
