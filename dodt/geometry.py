@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from dodt.frames import CameraIntrinsics
 
@@ -22,13 +23,43 @@ def iou_matrix(centers_a: np.ndarray, sizes_a: np.ndarray, centers_b: np.ndarray
     """(N, M) 3D IoU of axis-aligned boxes: intersection volume over union volume."""
     ca, sa = np.asarray(centers_a, float).reshape(-1, 3), np.asarray(sizes_a, float).reshape(-1, 3)
     cb, sb = np.asarray(centers_b, float).reshape(-1, 3), np.asarray(sizes_b, float).reshape(-1, 3)
-    lo = np.maximum((ca - sa / 2)[:, None, :], (cb - sb / 2)[None, :, :])
-    hi = np.minimum((ca + sa / 2)[:, None, :], (cb + sb / 2)[None, :, :])
-    inter = np.prod(np.clip(hi - lo, 0.0, None), axis=2)
-    va, vb = np.prod(sa, axis=1), np.prod(sb, axis=1)
-    union = va[:, None] + vb[None, :] - inter
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(union > 0, inter / union, 0.0)
+    return _iou_matrix(ca, sa, cb, sb)
+
+
+@njit(cache=True, nogil=True)
+def _maximum(x, y):
+    """np.maximum of two floats (NaN propagates)."""
+    return x if x != x or x >= y else y
+
+
+@njit(cache=True, nogil=True)
+def _minimum(x, y):
+    """np.minimum of two floats (NaN propagates)."""
+    return x if x != x or x <= y else y
+
+
+@njit(cache=True, nogil=True)
+def _iou_matrix(ca, sa, cb, sb):
+    """iou_matrix's arithmetic, pair by pair in numpy's order: bounds c -+ s / 2, overlap per axis
+    clipped at 0, volumes as products x y z from left to right, union va + vb - inter."""
+    n, m = ca.shape[0], cb.shape[0]
+    out = np.empty((n, m))
+    va = np.empty(n)
+    vb = np.empty(m)
+    for i in range(n):
+        va[i] = sa[i, 0] * sa[i, 1] * sa[i, 2]
+    for j in range(m):
+        vb[j] = sb[j, 0] * sb[j, 1] * sb[j, 2]
+    for i in range(n):
+        for j in range(m):
+            inter = 1.0
+            for a in range(3):
+                lo = _maximum(ca[i, a] - sa[i, a] / 2, cb[j, a] - sb[j, a] / 2)
+                hi = _minimum(ca[i, a] + sa[i, a] / 2, cb[j, a] + sb[j, a] / 2)
+                w = hi - lo
+                inter = inter * (w if w > 0.0 or w != w else 0.0)
+            union = va[i] + vb[j] - inter
+            out[i, j] = inter / union if union > 0 else 0.0
     return out
 
 

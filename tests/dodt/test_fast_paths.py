@@ -323,3 +323,35 @@ def test_kth_smallest_is_partitions():
         q = float(rng.choice([0.0, 0.5, 2.0, 5.0, 20.0, 30.0, 50.0]))
         for k in (int(q / 100.0 * (n - 1)), int((100.0 - q) / 100.0 * (n - 1))):
             assert _same(np.float64(_kth_smallest(a, k)), np.float64(_partition_kth(a, k)))
+
+
+def _iou_reference(centers_a, sizes_a, centers_b, sizes_b):
+    """iou_matrix in numpy, as first written."""
+    ca, sa = np.asarray(centers_a, float).reshape(-1, 3), np.asarray(sizes_a, float).reshape(-1, 3)
+    cb, sb = np.asarray(centers_b, float).reshape(-1, 3), np.asarray(sizes_b, float).reshape(-1, 3)
+    lo = np.maximum((ca - sa / 2)[:, None, :], (cb - sb / 2)[None, :, :])
+    hi = np.minimum((ca + sa / 2)[:, None, :], (cb + sb / 2)[None, :, :])
+    inter = np.prod(np.clip(hi - lo, 0.0, None), axis=2)
+    va, vb = np.prod(sa, axis=1), np.prod(sb, axis=1)
+    union = va[:, None] + vb[None, :] - inter
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(union > 0, inter / union, 0.0)
+
+
+def test_iou_matrix_is_the_numpy_one():
+    from dodt.geometry import iou_matrix
+
+    rng = np.random.default_rng(7)
+    for trial in range(2000):
+        n, m = int(rng.integers(0, 8)), int(rng.integers(0, 8))
+        ca = rng.uniform(-3, 3, (n, 3))
+        cb = np.concatenate([ca[: m // 2] + rng.normal(0, 0.2, (min(m // 2, n), 3)),
+                             rng.uniform(-3, 3, (m - min(m // 2, n), 3))])
+        sa, sb = rng.uniform(0, 2, (n, 3)), rng.uniform(0, 2, (len(cb), 3))
+        if trial % 7 == 0 and n:
+            sa[0, rng.integers(3)] = 0.0  # a flat box
+        if trial % 11 == 0 and n and len(cb):
+            cb[0], sb[0] = ca[0] + sa[0], sa[0]  # touching corners
+        want = _iou_reference(ca, sa, cb, sb)
+        got = iou_matrix(list(ca), list(sa), list(cb), list(sb))
+        assert _same(got, want)
