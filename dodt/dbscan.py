@@ -15,6 +15,7 @@ from numba import njit
 
 from dodt.config import DBSCANConfig
 from dodt.detection import Detection
+from dodt.geometry import column_bounds
 
 
 @njit(cache=True, nogil=True)
@@ -174,35 +175,6 @@ def _dbscan_kernel(points, eps, min_points):
     return labels
 
 
-@njit(cache=True, nogil=True)
-def _bounds(pts):
-    """Per-column minimum and maximum of an (N, 3) array as float64, the values numpy's
-    min(axis=0) and max(axis=0) give (a NaN in a column makes both NaN)."""
-    n = pts.shape[0]
-    if n == 0:
-        raise ValueError("no points")
-    lo = np.empty(3)
-    hi = np.empty(3)
-    for a in range(3):
-        mn = pts[0, a]
-        mx = mn
-        for i in range(1, n):
-            v = pts[i, a]
-            if v != v:  # NaN wins, as in numpy
-                mn = v
-                mx = v
-                break
-            if v < mn:
-                mn = v
-            elif v > mx:
-                mx = v
-        if mn != mn:
-            mx = mn
-        lo[a] = mn
-        hi[a] = mx
-    return lo, hi
-
-
 def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
     """Cluster label per point (0, 1, ... in order of first core point), -1 for noise; the border
     rule is in the module docstring."""
@@ -359,7 +331,7 @@ def _cluster_parts(points, labels, split_width, split_bin, valley_ratio, min_bin
                 if part[i] == p:
                     out[m] = cluster[i]
                     m += 1
-            lo, hi = _bounds(out[m0:m])
+            lo, hi = column_bounds(out[m0:m])
             for a in range(2):
                 g = min_size_xy - (hi[a] - lo[a])
                 if not (g >= 0.0 or g != g):  # np.maximum(g, 0.0)

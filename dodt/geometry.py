@@ -95,6 +95,58 @@ def box_cut_by_view_side(center: np.ndarray, size: np.ndarray, K: CameraIntrinsi
     return bool(u.min() < 0.0 or u.max() > K.width - 1)
 
 
+@njit(cache=True, nogil=True)
+def column_bounds(pts):
+    """Per-column minimum and maximum of an (N, 3) array as float64, the values numpy's
+    min(axis=0) and max(axis=0) give (a NaN in a column makes both NaN)."""
+    n = pts.shape[0]
+    if n == 0:
+        raise ValueError("no points")
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        mn = pts[0, a]
+        mx = mn
+        for i in range(1, n):
+            v = pts[i, a]
+            if v != v:  # NaN wins, as in numpy
+                mn = v
+                mx = v
+                break
+            if v < mn:
+                mn = v
+            elif v > mx:
+                mx = v
+        if mn != mn:
+            mx = mn
+        lo[a] = mn
+        hi[a] = mx
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def crop_to_box(points, lo, hi):
+    """points[np.all((points >= lo) & (points <= hi), axis=1)] of (N, 3) points: the rows within
+    the bounds, in order, as a new array."""
+    n = points.shape[0]
+    keep = np.empty(n, np.bool_)
+    m = 0
+    for i in range(n):
+        ok = True
+        for a in range(3):
+            x = points[i, a]
+            ok = ok and x >= lo[a] and x <= hi[a]
+        keep[i] = ok
+        m += ok
+    out = np.empty((m, 3), points.dtype)
+    j = 0
+    for i in range(n):
+        if keep[i]:
+            out[j] = points[i]
+            j += 1
+    return out
+
+
 def points_in_box(points: np.ndarray, center: np.ndarray, size: np.ndarray, grow: float = 0.0) -> np.ndarray:
     lo, hi = box_bounds(center, np.asarray(size) + 2 * grow)
     return np.all((points >= lo) & (points <= hi), axis=1)

@@ -17,12 +17,13 @@ from itertools import islice
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from dodt.association import TrackView, assign, features, mean_columns, similarity_matrix
 from dodt.config import DODTConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics
-from dodt.geometry import wrap_angle
+from dodt.geometry import column_bounds, crop_to_box, wrap_angle
 from dodt.identification import decide, is_candidate, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
 from dodt.learned.layout import iou_one
@@ -47,6 +48,21 @@ def _anchor(det: Detection, source: str) -> np.ndarray:
             return mean_columns(det.points, 2).astype(float)
         return np.median(det.points[:, :2], axis=0).astype(float)
     return det.center[:2].astype(float)
+
+
+@njit(cache=True, nogil=True)
+def _count_behind(depth, v0, v1, u0, u1, step, far):
+    """(count of depth[v0:v1:step, u0:u1:step] > 0, count of those > far)."""
+    n_valid = 0
+    n_behind = 0
+    for v in range(v0, min(v1, depth.shape[0]), step):
+        for u in range(u0, min(u1, depth.shape[1]), step):
+            d = depth[v, u]
+            if d > 0:
+                n_valid += 1
+                if d > far:
+                    n_behind += 1
+    return n_valid, n_behind
 
 
 class Track:
@@ -255,8 +271,9 @@ class Track:
                 # only the part of the old cloud within matching reach of the points can hold
                 # their nearest neighbours: the same matches, from a much smaller k-d tree
                 r = match_reach(dt, cfg)
-                lo, hi = voters.min(axis=0) - r, voters.max(axis=0) + r
-                near = cloud_then[np.all((cloud_then >= lo) & (cloud_then <= hi), axis=1)]
+                lo, hi = column_bounds(voters)  # voters.min(axis=0), voters.max(axis=0)
+                lo, hi = lo.astype(voters.dtype) - r, hi.astype(voters.dtype) + r
+                near = crop_to_box(cloud_then, lo, hi)
                 votes, valid, skipped = vote(voters, near, dt, v_box, T_then, K, max_depth, cfg)
         cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
         self.candidates.append(cand)
@@ -349,10 +366,11 @@ class Tracker:
                     v0, v1 = int(max(v - half_h, 0)), int(min(v + half_h, H - 1))
                     inside = (u1 - u0) >= 0.6 * 2 * half_w and (v1 - v0) >= 0.6 * 2 * half_h
                     if inside and u1 > u0 and v1 > v0:
-                        win = depth_m[v0:v1 + 1:2, u0:u1 + 1:2]
-                        win = win[win > 0]
+                        # of the valid depths (> 0) in every other pixel of the box's image region,
+                        # how many lie behind it (farther than its centre by the margin)
+                        n_valid, n_behind = _count_behind(depth_m, v0, v1 + 1, u0, u1 + 1, 2, pc[2] + margin)
                         # seen through: nearly everything in the box's image region lies behind it
-                        if win.size >= 20 and np.mean(win > pc[2] + margin) > tc.seen_through_fraction:
+                        if n_valid >= 20 and n_behind / n_valid > tc.seen_through_fraction:
                             dropped += 1
                             continue
             keep.append(tr)

@@ -20,8 +20,6 @@ from __future__ import annotations
 import math
 from collections import deque
 
-import numpy as np
-
 
 class FrameClock:
     """The frame period as the pipeline sees it.
@@ -41,7 +39,7 @@ class FrameClock:
         """Note the interval between two processed frames [s]."""
         if math.isfinite(dt) and dt > 0:
             self._intervals.append(dt)
-            self.period = float(np.median(self._intervals))
+            self.period = _median(self._intervals)
 
     def steps(self, dt: float) -> float:
         x = dt * self.reference_rate
@@ -71,6 +69,13 @@ class FrameClock:
         if not x < 1e9:
             return 1 << 30
         return int(math.floor(x + 0.25)) + 1
+
+
+def _median(values) -> float:
+    """np.median of a few finite floats: the middle one, or the mean of the middle two."""
+    v = sorted(values)
+    m = len(v) // 2
+    return float(v[m]) if len(v) % 2 else float((v[m - 1] + v[m]) / 2)
 
 
 def blend(weight: float, steps: float) -> float:

@@ -8,7 +8,7 @@ from numba import njit
 
 from dodt.association import _std_columns, mean_columns
 from dodt.config import DepthConfig, UDepthConfig, VoxelConfig
-from dodt.dbscan import _bounds
+from dodt.geometry import column_bounds as _bounds
 from dodt.frames import CameraIntrinsics
 from dodt.pointcloud import VoxelCloud
 from dodt.udepth import UDepthDetector
@@ -355,3 +355,47 @@ def test_iou_matrix_is_the_numpy_one():
         want = _iou_reference(ca, sa, cb, sb)
         got = iou_matrix(list(ca), list(sa), list(cb), list(sb))
         assert _same(got, want)
+
+
+def test_frame_period_is_numpys_median():
+    from collections import deque
+
+    from dodt.windows import _median
+
+    rng = np.random.default_rng(9)
+    for _ in range(5000):
+        n = int(rng.integers(1, 10))
+        vals = deque(float(x) for x in rng.choice([1 / 30, 1 / 15, 0.1, 1 / 29.97, 0.0333], n) *
+                     rng.uniform(0.9, 1.1, n))
+        assert _same(np.float64(_median(vals)), np.float64(float(np.median(vals))))
+
+
+def test_seen_through_counts():
+    from dodt.tracker import _count_behind
+
+    rng = np.random.default_rng(10)
+    depth = rng.uniform(0, 6, (48, 64)).astype(np.float32)
+    depth[rng.random((48, 64)) < 0.2] = 0.0
+    depth[rng.random((48, 64)) < 0.02] = np.nan
+    for _ in range(500):
+        v0, u0 = int(rng.integers(0, 47)), int(rng.integers(0, 63))
+        v1, u1 = int(rng.integers(v0 + 1, 48)), int(rng.integers(u0 + 1, 64))
+        far = np.float64(rng.uniform(0, 6))
+        win = depth[v0:v1 + 1:2, u0:u1 + 1:2]
+        win = win[win > 0]
+        n_valid, n_behind = _count_behind(depth, v0, v1 + 1, u0, u1 + 1, 2, far)
+        assert n_valid == win.size
+        if win.size:
+            assert n_behind / n_valid == np.mean(win > far)
+
+
+def test_crop_to_box_is_the_mask():
+    from dodt.geometry import crop_to_box
+
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        pts = rng.normal(0, 1, (int(rng.integers(0, 400)), 3)).astype(np.float32)
+        lo = (rng.normal(0, 1, 3) - 0.5).astype(np.float32)
+        hi = lo + rng.uniform(0, 2, 3).astype(np.float32)
+        want = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
+        assert _same(crop_to_box(pts, lo, hi), want)
