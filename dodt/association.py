@@ -123,13 +123,39 @@ def similarity_matrix(tracks: list[TrackView], dets: list[Detection], cfg: Assoc
         overlap = iou_matrix(tc, ts, dc, ds) > 0
         return np.where(overlap, sim, -np.inf), cfg.cosine_threshold
     pos_scale = np.sqrt(cfg.position_scale**2 + np.array([t.position_variance for t in tracks]))
-    dpos = (tc[:, None, :] - dc[None, :, :])
-    d2 = (dpos[..., 0] ** 2 + dpos[..., 1] ** 2) / pos_scale[:, None] ** 2 + dpos[..., 2] ** 2 / cfg.position_scale**2
-    d2 += np.sum((ts[:, None, :] - ds[None, :, :]) ** 2, axis=2) / cfg.size_scale**2
-    rel = np.abs(tn[:, None] - dn[None, :]) / np.maximum(np.maximum(tn[:, None], dn[None, :]), 1.0)
-    d2 += (rel / cfg.count_scale) ** 2
-    d2 += np.sum((tstd[:, None, :] - dstd[None, :, :]) ** 2, axis=2) / cfg.spread_scale**2
+    d2 = _feature_distances(tc, dc, pos_scale, cfg.position_scale**2, ts, ds, cfg.size_scale**2, tn, dn,
+                            float(cfg.count_scale), tstd, dstd, cfg.spread_scale**2)
     return np.exp(-d2), cfg.similarity_threshold
+
+
+@njit(cache=True, nogil=True)
+def _feature_distances(tc, dc, pos_scale, pos2, ts, ds, size2, tn, dn, count_scale, tstd, dstd, spread2):
+    """(T, D) squared feature distances, each term as the array expressions computed it (squares
+    as products, sums over x, y, z from left to right):
+    (dx^2 + dy^2) / pos_scale^2 + dz^2 / pos2 + |size diff|^2 / size2
+    + (|n_t - n_d| / max(n_t, n_d, 1) / count_scale)^2 + |spread diff|^2 / spread2."""
+    T, D = tc.shape[0], dc.shape[0]
+    d2 = np.empty((T, D))
+    for i in range(T):
+        ps2 = pos_scale[i] * pos_scale[i]
+        for j in range(D):
+            dx = tc[i, 0] - dc[j, 0]
+            dy = tc[i, 1] - dc[j, 1]
+            dz = tc[i, 2] - dc[j, 2]
+            e = (dx * dx + dy * dy) / ps2 + dz * dz / pos2
+            s0 = ts[i, 0] - ds[j, 0]
+            s1 = ts[i, 1] - ds[j, 1]
+            s2 = ts[i, 2] - ds[j, 2]
+            e = e + (s0 * s0 + s1 * s1 + s2 * s2) / size2
+            big = tn[i] if tn[i] >= dn[j] or tn[i] != tn[i] else dn[j]  # np.maximum
+            big = big if big >= 1.0 or big != big else 1.0
+            r = abs(tn[i] - dn[j]) / big / count_scale
+            e = e + r * r
+            p0 = tstd[i, 0] - dstd[j, 0]
+            p1 = tstd[i, 1] - dstd[j, 1]
+            p2 = tstd[i, 2] - dstd[j, 2]
+            d2[i, j] = e + (p0 * p0 + p1 * p1 + p2 * p2) / spread2
+    return d2
 
 
 def assign(scores: np.ndarray, threshold: float) -> list[tuple[int, int]]:

@@ -399,3 +399,37 @@ def test_crop_to_box_is_the_mask():
         hi = lo + rng.uniform(0, 2, 3).astype(np.float32)
         want = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
         assert _same(crop_to_box(pts, lo, hi), want)
+
+
+def test_feature_similarity_is_the_array_expression():
+    from dodt.association import TrackView, similarity_matrix
+    from dodt.config import AssociationConfig
+    from dodt.detection import Detection
+
+    rng = np.random.default_rng(12)
+    cfg = AssociationConfig()
+    for _ in range(300):
+        T, D = int(rng.integers(1, 9)), int(rng.integers(1, 9))
+        tracks = [TrackView(center=rng.normal(0, 3, 3), size=rng.uniform(0.1, 2, 3), count=int(rng.integers(0, 500)),
+                            spread=rng.uniform(0, 1, 3), position_variance=float(rng.uniform(0, 2)))
+                  for _ in range(T)]
+        dets = [Detection(center=rng.normal(0, 3, 3), size=rng.uniform(0.1, 2, 3), source="dbscan",
+                          points=rng.normal(0, 0.5, (int(rng.integers(0, 300)), 3)).astype(np.float32))
+                for _ in range(D)]
+        got, thr = similarity_matrix(tracks, dets, cfg, np.zeros(3))
+        tc = np.array([t.center for t in tracks])
+        dc = np.array([d.center for d in dets])
+        ts = np.array([t.size for t in tracks])
+        ds = np.array([d.size for d in dets])
+        dn = np.array([len(d.points) for d in dets], float)
+        dstd = np.array([d.points.std(axis=0).astype(float) if len(d.points) >= 2 else np.zeros(3) for d in dets])
+        tn = np.array([t.count for t in tracks], float)
+        tstd = np.array([t.spread for t in tracks])
+        pos_scale = np.sqrt(cfg.position_scale**2 + np.array([t.position_variance for t in tracks]))
+        dpos = (tc[:, None, :] - dc[None, :, :])
+        d2 = (dpos[..., 0] ** 2 + dpos[..., 1] ** 2) / pos_scale[:, None] ** 2 + dpos[..., 2] ** 2 / cfg.position_scale**2
+        d2 += np.sum((ts[:, None, :] - ds[None, :, :]) ** 2, axis=2) / cfg.size_scale**2
+        rel = np.abs(tn[:, None] - dn[None, :]) / np.maximum(np.maximum(tn[:, None], dn[None, :]), 1.0)
+        d2 += (rel / cfg.count_scale) ** 2
+        d2 += np.sum((tstd[:, None, :] - dstd[None, :, :]) ** 2, axis=2) / cfg.spread_scale**2
+        assert _same(got, np.exp(-d2)) and thr == cfg.similarity_threshold
