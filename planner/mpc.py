@@ -108,11 +108,15 @@ class MPC:
         return MPCResult(tr, tr.status, iters, 0.0, 0.0, ms, ignored)
 
     def _tolerance(self, solver, loose: bool) -> None:
-        """The normal OSQP limits, or the short, loose ones other passing sides are compared on."""
+        """The normal OSQP limits, or the short, loose ones other passing sides are compared on (set only
+        when the solver has the others: a new solver has the normal ones)."""
+        if getattr(solver, "_loose", False) == loose:
+            return
         c = self.cfg
         solver.update_settings(max_iter=c.homotopy_max_iter if loose else c.max_iter,
                                eps_abs=c.homotopy_eps if loose else c.eps_abs,
                                eps_rel=c.homotopy_eps if loose else c.eps_rel)
+        solver._loose = loose
 
     def _rejected(self, res) -> str:
         """Why an OSQP result cannot be used ('' when it can): solved (or out of iterations with a primal
