@@ -164,27 +164,25 @@ class RenderProcess:
 
     def _recv(self, timeout: float, doing: str):
         if not self._conn.poll(timeout):
-            self._healthy = False
             raise RenderProcessError(f"the render process did not answer within {timeout:.0f} s ({doing})")
         try:
             msg = self._conn.recv()
         except (EOFError, OSError):
-            self._healthy = False
             raise RenderProcessError(f"the render process stopped ({doing}; exit code {self._proc.poll()})") \
                 from None
         if msg[0] == "error":
-            self._healthy = False
             raise RenderProcessError(f"the render process failed ({doing}): {msg[1]}")
         return msg[0], msg[1:] if len(msg) > 2 else msg[1]
 
     def submit(self, seq: int, t: float, pos, quat, people, light_direction) -> None:
         """Frame ``seq`` captured at sim time t: the drone's pose and the people's (sim.people.WalkerPose)."""
         light = None if light_direction is None else [float(x) for x in light_direction]
+        healthy, self._healthy = self._healthy, False  # until the request is whole (not cut by Ctrl-C)
         try:
             self._conn.send((seq, float(t), tuple(pos), tuple(quat), list(people), light))
         except (BrokenPipeError, OSError):
-            self._healthy = False
             raise RenderProcessError(f"the render process stopped (exit code {self._proc.poll()})") from None
+        self._healthy = healthy
         self._outstanding.append(seq)
 
     def result(self, seq: int) -> tuple[np.ndarray | None, ...]:
@@ -192,6 +190,9 @@ class RenderProcess:
         None, obstacle ids or None."""
         if not self._outstanding or self._outstanding[0] != seq:
             raise RenderProcessError(f"frame {seq} asked out of order (outstanding: {self._outstanding[:3]})")
+        # the connection is in step with the child again only once the whole frame is read: a reply cut
+        # short (an error, Ctrl-C) leaves the child to be ended, not released
+        healthy, self._healthy = self._healthy, False
         kind, (got, render_s, layout) = self._recv(_REPLY_TIMEOUT_S, f"rendering frame {seq}")
         if got != seq:
             raise RenderProcessError(f"the render process answered frame {got} for frame {seq}")
@@ -206,6 +207,7 @@ class RenderProcess:
             a = np.empty(shape, dtype=np.dtype(dtype))
             self._conn.recv_bytes_into(memoryview(a).cast("B"))
             out.append(a)
+        self._healthy = healthy
         return tuple(out)
 
     def close(self) -> None:
@@ -216,7 +218,7 @@ class RenderProcess:
         try:
             while self._healthy and self._outstanding:
                 self.result(self._outstanding[0])
-        except RenderProcessError:
+        except Exception:  # noqa: BLE001 - a child that cannot answer is ended below, whatever went wrong
             pass
         if self._healthy and self._proc.poll() is None and len(_IDLE) < _MAX_IDLE:
             try:

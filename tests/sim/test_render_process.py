@@ -83,3 +83,24 @@ def test_a_released_render_process_builds_the_next_world_with_the_same_frames():
     beside = _frames(40, frame_latency=1, render_process=True)
     assert len(here) == len(beside) == 10
     assert all(_same(a, b) for a, b in zip(here, beside))
+
+
+def test_a_render_process_whose_reply_was_cut_short_is_ended_not_released():
+    from sim import render_process
+
+    with World(load_scenario("corridor"), seed=0, frame_latency=1, render_process=True) as w:
+        for _ in range(8):
+            w.step(REF)
+        rp = w._render_proc
+        proc = rp._proc
+        rp.submit(99, w.time, *w._drone_pose(), w.people_poses(), w.light_direction)
+        seq = rp._outstanding[0]
+
+        def cut(*_):
+            raise KeyboardInterrupt  # Ctrl-C between a frame's header and its images
+
+        rp._conn.recv_bytes_into = cut
+        with pytest.raises(KeyboardInterrupt):
+            rp.result(seq)
+    assert proc.wait(timeout=20) is not None  # ended with its world
+    assert all(p is not proc for p, _ in render_process._IDLE)
