@@ -185,7 +185,7 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
 @njit(cache=True, nogil=True)
 def _valley_split(xy, idx, split_width, split_bin, valley_ratio, min_bins, min_points):
     """One cut of the points xy[idx] at their deepest valley: (left, right) index arrays, or two
-    empty arrays when there is none (see split_parts)."""
+    empty arrays when there is none (see _split_parts)."""
     n = idx.shape[0]
     none = (idx[:0], idx[:0])
     mx, my = 0.0, 0.0
@@ -247,9 +247,20 @@ def _valley_split(xy, idx, split_width, split_bin, valley_ratio, min_bins, min_p
     return idx[t < lo - 0.5], idx[t >= hi + 0.5]
 
 
+_SPLIT_MAX_DEPTH = 4  # a cluster is cut at most 5 levels deep
+
+
 @njit(cache=True, nogil=True)
 def _split_parts(xy, split_width, split_bin, valley_ratio, min_bins, min_points, max_depth):
-    """Part number per point (-1: in a valley), parts numbered depth first, left part first."""
+    """The parts of one cluster (horizontal coordinates xy), cut at sparse slices (see
+    DBSCANConfig.split_width): part number per point (-1: in a valley), parts numbered depth first,
+    left part first.
+
+    The long axis is the principal axis of xy. Slices of ``split_bin`` along it are counted; a slice
+    is a valley when its count is at most ``valley_ratio`` of the highest slice on each side of it,
+    and each side is at least ``min_bins`` slices long and has ``min_points`` points. The cluster is
+    cut at its deepest valley, and each part again (at most ``max_depth`` + 1 levels deep); the
+    valley's own points belong to neither part."""
     n = xy.shape[0]
     labels = -np.ones(n, np.int64)
     stack = [(np.arange(n), 0)]
@@ -273,26 +284,10 @@ def _split_parts(xy, split_width, split_bin, valley_ratio, min_bins, min_points,
     return labels
 
 
-def split_parts(points: np.ndarray, cfg: DBSCANConfig) -> list[np.ndarray]:
-    """Index arrays of the parts of one cluster, cut at sparse slices (see DBSCANConfig.split_width).
-
-    The long axis is the principal axis of the horizontal coordinates. Slices of ``split_bin``
-    along it are counted; a slice is a valley when its count is at most ``split_valley_ratio``
-    of the highest slice on each side of it, and each side is at least ``split_min_part`` long and
-    has ``min_points`` points. The cluster is cut at its deepest valley, and each part again (at
-    most 5 levels deep); the valley's own points belong to neither part. Compiled (numba).
-    """
-    xy = np.ascontiguousarray(points[:, :2], dtype=np.float64)
-    labels = _split_parts(xy, float(cfg.split_width), float(cfg.split_bin), float(cfg.split_valley_ratio),
-                          int(np.ceil(cfg.split_min_part / cfg.split_bin)), int(cfg.min_points), 4)
-    n_parts = int(labels.max()) + 1 if len(labels) else 0
-    return [np.flatnonzero(labels == p) for p in range(n_parts)]
-
-
 @njit(cache=True, nogil=True)
 def _cluster_parts(points, labels, split_width, split_bin, valley_ratio, min_bins, min_points, max_depth, min_size_xy):
     """The parts of every cluster (clusters by label, each cluster's points in index order, its
-    parts as split_parts gives them) and their boxes: (the parts' points one after another,
+    parts as _split_parts gives them) and their boxes: (the parts' points one after another,
     offsets (P + 1,), lower corners (P, 3), upper corners (P, 3)); the boxes at least
     ``min_size_xy`` wide, grown about their middle."""
     n = labels.shape[0]
@@ -360,10 +355,10 @@ class DBSCANDetector:
         if labels.size == 0 or labels.max() < 0:
             return []
         c = self.cfg
-        # every cluster in label order, cut into its parts (split_parts), each part's box
+        # every cluster in label order, cut into its parts (_split_parts), each part's box
         pts, offsets, lo, hi = _cluster_parts(
             np.asarray(points).reshape(-1, 3), labels, float(c.split_width), float(c.split_bin),
-            float(c.split_valley_ratio), int(np.ceil(c.split_min_part / c.split_bin)), int(c.min_points), 4,
-            float(c.min_size_xy))
+            float(c.split_valley_ratio), int(np.ceil(c.split_min_part / c.split_bin)), int(c.min_points),
+            _SPLIT_MAX_DEPTH, float(c.min_size_xy))
         return [Detection.from_bounds(lo[k], hi[k], "dbscan", pts[offsets[k]:offsets[k + 1]].copy())
                 for k in range(len(lo))]
