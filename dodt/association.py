@@ -33,27 +33,6 @@ class TrackView:
 
 
 @njit(cache=True, nogil=True)
-def _std_columns_f32(pts):
-    """Per-column standard deviation of an (N, 3) float32 array, as numpy's std(axis=0) computes
-    it: float32 column sums accumulated row after row from 0, the mean, the squared deviations
-    summed the same way, divided by N, the square root; as float64."""
-    n = pts.shape[0]
-    out = np.empty(3)
-    nf = np.float32(n)
-    for a in range(3):
-        acc = np.float32(0.0)
-        for i in range(n):
-            acc += pts[i, a]
-        mean = acc / nf
-        acc = np.float32(0.0)
-        for i in range(n):
-            d = pts[i, a] - mean
-            acc += d * d
-        out[a] = np.sqrt(acc / nf)
-    return out
-
-
-@njit(cache=True, nogil=True)
 def _mean_columns_f32(pts, n_cols):
     """Mean of each of the first n_cols columns of an (N, C) float32 array, as numpy's
     mean(axis=0) computes it: float32 sums accumulated row after row from 0, divided by N."""
@@ -65,6 +44,24 @@ def _mean_columns_f32(pts, n_cols):
         for i in range(n):
             acc += pts[i, a]
         out[a] = acc / nf
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _std_columns_f32(pts):
+    """Per-column standard deviation of an (N, 3) float32 array, as numpy's std(axis=0) computes
+    it: the mean (_mean_columns_f32), the squared deviations summed in float32 row after row from
+    0, divided by N, the square root; as float64."""
+    n = pts.shape[0]
+    out = np.empty(3)
+    nf = np.float32(n)
+    mean = _mean_columns_f32(pts, 3)
+    for a in range(3):
+        acc = np.float32(0.0)
+        for i in range(n):
+            d = pts[i, a] - mean[a]
+            acc += d * d
+        out[a] = np.sqrt(acc / nf)
     return out
 
 
