@@ -310,8 +310,7 @@ class Track:
         h = self._hist[self._h0:self._h1]
         recent = h[:, 0] >= stamp - self.cfg.track.output_history
         h = h.copy() if recent.all() else h[recent]
-        person = self.is_person
-        dynamic = bool(person or self.geometric_dynamic)  # self.dynamic
+        person, dynamic = self.is_person, self.dynamic
         v = np.zeros(3)
         v[:2] = self.kf.velocity
         a = np.zeros(3)
