@@ -17,7 +17,10 @@ collision also gets ``planner_knew``: the fraction of plans over the window at w
 lay inside a disc the planner kept its plan from, and ``known_for``: for how long before the contact
 (s, at most the window) it had known them without a break (0 when not at the last plan). A person
 known only a moment before was too close to stop for, whatever the planner; one known long before
-points at the planner.
+points at the planner. Where the plan records also say whom the planner stopped remembering (the
+shield's ``forgot``), ``forgot`` is the reason it last dropped a person predicted within ``lost_match``
+metres of this one in the window (planner.shield.FORGET_REASONS), and ``forgot_s`` how long before the
+contact: a person forgotten as "seen_free" a moment before the contact was where the prediction was not.
 """
 from __future__ import annotations
 
@@ -43,7 +46,7 @@ def _heading(frame: dict) -> float:
 
 
 def collision_rows(records: list[dict], window: float = 2.0, view_range: float = 5.0, match: float = 0.5,
-                   half_fov: float = HALF_FOV) -> list[dict]:
+                   half_fov: float = HALF_FOV, lost_match: float = 1.2) -> list[dict]:
     """The collisions of one episode's records, as dicts (see the module docstring)."""
     header = records[0]
     states = [r for r in records if r["k"] == "s"]
@@ -89,6 +92,7 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
             if speeds:
                 row["person_min_speed"] = round(min(speeds), 2)
             row.update(_planner_knew(plans, where, t, window))
+            row.update(_forgot(plans, where, t, window, lost_match))
         rows.append(row)
     return rows
 
@@ -110,6 +114,17 @@ def _planner_knew(plans: list[dict], where: list[tuple[float, np.ndarray]], t: f
             "known_for": round(t - stamps[-trailing], 2) if trailing else 0.0}
 
 
+def _forgot(plans: list[dict], where: list[tuple[float, np.ndarray]], t: float, window: float,
+            lost_match: float) -> dict:
+    """forgot and forgot_s of a person collision at t (module docstring); {} when no plan record says so."""
+    for p in sorted((p for p in plans if t - window <= p["t"] <= t and p.get("forgot")), key=lambda p: -p["t"]):
+        x, y = min(where, key=lambda w: abs(w[0] - p["t"]))[1] if where else (math.inf, math.inf)
+        near = [g for g in p["forgot"] if math.hypot(x - g[0], y - g[1]) <= lost_match]
+        if near:
+            return {"forgot": near[0][2], "forgot_s": round(t - p["t"], 2)}
+    return {}
+
+
 def logs_under(path: Path) -> list[Path]:
     """An episode log itself, the log of a run folder, or every episode log of a sweep folder."""
     path = Path(path)
@@ -125,7 +140,8 @@ def logs_under(path: Path) -> list[Path]:
 
 def format_table(rows: list[dict]) -> str:
     cols = ["seed", "t", "kind", "other_id", "fault", "drone_speed", "off_heading", "drone_closing",
-            "person_closing", "person_min_speed", "in_view", "tracked", "reported_moving", "planner_knew", "known_for"]
+            "person_closing", "person_min_speed", "in_view", "tracked", "reported_moving", "planner_knew", "known_for",
+            "forgot", "forgot_s"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         lines.append("| " + " | ".join("" if r.get(k) is None else str(r[k]) for k in cols) + " |")

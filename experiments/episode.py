@@ -91,14 +91,23 @@ def default_planner(robot_radius: float, settings: Settings | None = None) -> Pa
 
 def _threats(planner) -> dict:
     """A plan record's ``threats``: the people's discs the planner kept its plan from, where it says (the
-    shield's ``threats``, (M, 3) x, y, radius); nothing for a planner that does not."""
+    shield's ``threats``, (M, 3) x, y, radius), and ``forgot``: where the people it stopped remembering at
+    this plan were predicted, and why (the shield's ``forgotten``); nothing for a planner that does not."""
     th = getattr(planner, "threats", None)
     if th is None:
         return {}
     th = np.asarray(th, dtype=float)
     if th.ndim != 2 or th.shape[1] != 3:  # a plug-in's own attribute of that name: not ours to log
         return {}
-    return {"threats": np.round(th[np.all(np.isfinite(th), axis=1)], 2).tolist()}
+    out = {"threats": np.round(th[np.all(np.isfinite(th), axis=1)], 2).tolist()}
+    try:
+        gone = [[round(float(x), 2), round(float(y), 2), str(why)] for x, y, why in getattr(planner, "forgotten", ())]
+    except (TypeError, ValueError):  # a plug-in's own attribute of that name
+        gone = []
+    gone = [g for g in gone if math.isfinite(g[0]) and math.isfinite(g[1])]
+    if gone:
+        out["forgot"] = gone
+    return out
 
 
 def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePrediction, ...]:

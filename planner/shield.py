@@ -28,6 +28,12 @@ from planner.safety import check, in_the_way
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 
 
+# Why the shield stops remembering a person no longer reported: ``memory`` ran out; reported for under
+# ``memory_min_age`` (``young``); another report within ``memory_merge`` of its prediction (``merged``: that
+# one again); the camera saw its predicted place free since its last report (``seen_free``)
+FORGET_REASONS = ("memory", "young", "merged", "seen_free")
+
+
 @dataclass(frozen=True)
 class ShieldConfig:
     dt: float = 0.1  # s, the commitment's step
@@ -84,6 +90,7 @@ class PassiveSafetyShield:
         self.interventions = 0
         self._anchor = None  # (2,) where the current hold began
         self.threats = None  # (M, 3) x, y, radius of the people's discs at the last plan (for the episode log)
+        self.forgotten = []  # (x, y, reason) of the people it stopped remembering at the last plan (FORGET_REASONS)
 
     @property
     def path(self):
@@ -131,19 +138,17 @@ class PassiveSafetyShield:
                 self._tracks[o.id] = (self._tracks.get(o.id, (now,))[0], now, o)
                 current[o.id] = o
         rows = [self._disc(o, 0.0) for o in current.values()]
+        self.forgotten = []
         seen = inp.seen
         for oid, (first, last, o) in list(self._tracks.items()):
             if oid in current:
                 continue
             age = now - last
             ghost = self._disc(o, age)
-            lost = (age > c.memory or last - first < c.memory_min_age
-                    or any(np.hypot(*(np.asarray(q.center[:2]) - ghost[:2])) < c.memory_merge for q in current.values()))
-            if not lost and seen is not None:  # its place seen free since it was last reported
-                i, j = np.floor((np.asarray(ghost[:2]) - seen.origin) / seen.res).astype(int)
-                lost = 0 <= i < seen.shape[0] and 0 <= j < seen.shape[1] and seen.last[i, j] > last
-            if lost:
+            why = self._forget(ghost, first, last, age, current, seen)
+            if why is not None:
                 del self._tracks[oid]
+                self.forgotten.append((float(ghost[0]), float(ghost[1]), why))
             else:
                 rows.append(ghost)
         if not rows:
@@ -152,6 +157,21 @@ class PassiveSafetyShield:
         a = np.array(rows)
         return (np.ascontiguousarray(a[:, :2]), np.ascontiguousarray(a[:, 2:4]), np.ascontiguousarray(a[:, 4]),
                 np.ascontiguousarray(a[:, 5]))
+
+    def _forget(self, ghost, first: float, last: float, age: float, current: dict, seen) -> str | None:
+        """Why a person no longer reported is not remembered (FORGET_REASONS), or None: still remembered."""
+        c = self.cfg
+        if age > c.memory:
+            return "memory"
+        if last - first < c.memory_min_age:
+            return "young"
+        if any(np.hypot(*(np.asarray(q.center[:2]) - ghost[:2])) < c.memory_merge for q in current.values()):
+            return "merged"
+        if seen is not None:  # its predicted place seen free since it was last reported
+            i, j = np.floor((np.asarray(ghost[:2]) - seen.origin) / seen.res).astype(int)
+            if 0 <= i < seen.shape[0] and 0 <= j < seen.shape[1] and seen.last[i, j] > last:
+                return "seen_free"
+        return None
 
     def _disc(self, o: ObstaclePrediction, age: float) -> list[float]:
         """[cx, cy, vx, vy, r0, g] of an obstacle's reach disc ``age`` s after its report."""
@@ -184,6 +204,7 @@ class PassiveSafetyShield:
     def _plan(self, inp: PlannerInput) -> Trajectory:
         c = self.cfg
         self.threats = None
+        self.forgotten = []
         if not valid_input(inp):
             return invalid_input_stop(inp, c.a_brake)
         if inp.occupancy is None:

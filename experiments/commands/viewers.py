@@ -43,8 +43,11 @@ def add_parser(sub) -> None:
                     "person's lowest speed in the --window seconds before it (a walker that stood or turned), and "
                     "the fraction of camera frames in that window in which the person was in the camera's view, "
                     "tracked by perception, and reported moving. A person hit from outside the view was never "
-                    "seen coming; one seen and "
-                    "reported moving points at the planner. Prints 'no collisions' when there are none.",
+                    "seen coming; one seen and reported moving points at the planner. With the default "
+                    "planner's logs: the fraction of plans at which it knew the person (planner_knew), for how "
+                    "long before the contact without a break (known_for), and why it last stopped remembering "
+                    "someone where the person was (forgot: memory, young, merged, seen_free) and how long before "
+                    "(forgot_s). Prints 'no collisions' when there are none.",
         epilog=examples("dodt-nav collisions runs/first",
                         "dodt-nav collisions runs/sweep runs/benchmark --window 3"),
         func=cmd_collisions)

@@ -91,6 +91,21 @@ def test_rows_say_how_long_the_planner_knew_the_person():
     assert "planner_knew" not in collision_rows(_records())[0]  # a log without threats: nothing said
 
 
+def test_rows_say_why_the_planner_forgot_the_person():
+    """The person walks out of the view to the drone's right (at 1.5 s); a prediction dropped near them
+    says why, one dropped far from them does not."""
+    recs = _records()
+    recs += [{"k": "plan", "t": 1.0, "status": "solved", "threats": [[1.0, 0.0, 0.4]]},
+             {"k": "plan", "t": 1.5, "status": "solved", "threats": [],
+              "forgot": [[6.0, 3.0, "memory"], [0.8, -0.5, "seen_free"]]},
+             {"k": "plan", "t": 2.0, "status": "solved", "threats": [], "forgot": [[5.0, 5.0, "merged"]]}]
+    person, static = collision_rows(recs)
+    assert person["forgot"] == "seen_free" and person["forgot_s"] == 0.5
+    assert "forgot" not in static
+    assert "forgot" not in collision_rows(recs, lost_match=0.5)[0]  # 0.94 m off the person: not them
+    assert "forgot" not in collision_rows(_records())[0]  # a log that does not say: nothing said
+
+
 def test_cli_prints_a_table_and_names_a_folder_without_logs(tmp_path, capsys):
     run = tmp_path / "run"
     run.mkdir()

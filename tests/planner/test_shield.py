@@ -105,6 +105,23 @@ def test_a_person_who_left_the_view_is_remembered_until_their_place_is_seen_free
     seen.observe_map(occ.column_blocked(0.8, 1.6, inflate=False), K, T, 0.85)
     tr = shield.plan(_input(0.9, (2.4, 0.0), (1.5, 0.0), [], occ=occ, seen=seen))
     assert tr.status == "solved"
+    assert [why for _, _, why in shield.forgotten] == ["seen_free"]
+
+
+def test_the_shield_says_why_it_stopped_remembering_someone():
+    shield = PassiveSafetyShield(Straight((0.0, 0.0)), CFG)
+    occ = _map()
+    for k in range(8):  # 4 reported for 0.7 s, 5 for 0.2 s
+        people = [_person(4, (3.6, 1.0))] + [_person(5, (3.0, -1.0))] * (k >= 6)
+        shield.plan(_input(0.1 * k, (1.0, 0.0), (0.0, 0.0), people, occ=occ))
+    shield.plan(_input(0.8, (1.0, 0.0), (0.0, 0.0), [], occ=occ))
+    assert [w for _, _, w in shield.forgotten] == ["young"] and shield.threats.shape == (1, 3)
+    shield.plan(_input(0.9, (1.0, 0.0), (0.0, 0.0), [_person(6, (3.7, 1.2))], occ=occ))
+    assert [w for _, _, w in shield.forgotten] == ["merged"]
+    shield.plan(_input(0.9 + CFG.memory + 0.1, (1.0, 0.0), (0.0, 0.0), [], occ=occ))
+    assert [(x, y, w) for x, y, w in shield.forgotten] == [(3.7, 1.2, "memory")]
+    shield.plan(_input(5.0, (1.0, 0.0), (0.0, 0.0), [], occ=occ))
+    assert shield.forgotten == []
 
 
 def test_when_nothing_is_safe_the_drone_stops_as_hard_as_it_can():
