@@ -117,8 +117,14 @@ def _planner_knew(plans: list[dict], where: list[tuple[float, np.ndarray]], t: f
 def _forgot(plans: list[dict], where: list[tuple[float, np.ndarray]], t: float, window: float,
             lost_match: float) -> dict:
     """forgot and forgot_s of a person collision at t (module docstring); {} when no plan record says so."""
-    for p in sorted((p for p in plans if t - window <= p["t"] <= t and p.get("forgot")), key=lambda p: -p["t"]):
-        x, y = min(where, key=lambda w: abs(w[0] - p["t"]))[1] if where else (math.inf, math.inf)
+    if not where:
+        return {}
+    for p in reversed(plans):  # the log's plans are in time order: the latest first
+        if p["t"] > t or not p.get("forgot"):
+            continue
+        if p["t"] < t - window:
+            break
+        x, y = min(where, key=lambda w: abs(w[0] - p["t"]))[1]
         near = [g for g in p["forgot"] if math.hypot(x - g[0], y - g[1]) <= lost_match]
         if near:
             return {"forgot": near[0][2], "forgot_s": round(t - p["t"], 2)}

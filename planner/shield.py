@@ -138,7 +138,6 @@ class PassiveSafetyShield:
                 self._tracks[o.id] = (self._tracks.get(o.id, (now,))[0], now, o)
                 current[o.id] = o
         rows = [self._disc(o, 0.0) for o in current.values()]
-        self.forgotten = []
         seen = inp.seen
         for oid, (first, last, o) in list(self._tracks.items()):
             if oid in current:
