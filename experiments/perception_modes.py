@@ -12,7 +12,8 @@ Modes:
   person is known while inside the camera's horizontal field of view within ``max_range``, and for
   ``memory`` seconds after leaving it (perfect tracking through occlusion), with exact position,
   size and velocity, and the acceleration the true velocity shows over the last 0.1 s (a tracker's
-  estimate, without its noise and lag).
+  estimate, without its noise and lag). ``oracle.half_view`` widens (or narrows) the view it sees
+  people in: what a planner would gain from a wider camera, or from more of them.
 - ``oracle-360``: the same without the field of view: every person within ``max_range`` in any
   direction. Not a sensor anyone has; it measures the planner alone (with it, collisions are the
   planner's, since nothing comes from where the camera does not look).
@@ -208,6 +209,9 @@ class OracleConfig:
     ``velocity_noise = NOISY_ORACLE_VELOCITY_NOISE``)."""
 
     max_range: float = 5.0  # m: a person is seen within this horizontal distance of the camera (nearest side)
+    # deg: half the horizontal view a person is seen in, about the camera's heading (180: all around);
+    # None: the camera's own (43.5 for the D435). What a wider camera, or more of them, would give a planner.
+    half_view: float | None = None
     memory: float = 1.0  # s: a person out of view is still reported this long after last seen
     # s: each person's acceleration is the change of its true velocity over this window (the truth holds
     # no acceleration); None: zero acceleration (constant-velocity predictions)
@@ -225,6 +229,8 @@ class OracleConfig:
         if not self.memory >= 0.0 or not self.velocity_noise >= 0.0:
             raise ValueError(f"OracleConfig: memory and velocity_noise must be >= 0, got {self.memory} and "
                              f"{self.velocity_noise}")
+        if self.half_view is not None and not 0.0 < self.half_view <= 180.0:
+            raise ValueError(f"OracleConfig: half_view must be in (0, 180] degrees (or none), got {self.half_view}")
         if self.accel_window is not None and not self.accel_window > 0.0:
             raise ValueError(f"OracleConfig: accel_window must be > 0 (or none), got {self.accel_window}")
         if not self.noise_time > 0.0:
@@ -275,6 +281,8 @@ class OraclePerception:
         if truth is None:
             raise ValueError("the oracle perception mode needs the simulator's ground truth")
         cam, heading, half_fov = horizontal_view(truth.T_world_camera, frame.intrinsics)
+        if self.cfg.half_view is not None:
+            half_fov = math.radians(self.cfg.half_view)
         preds, boxes, tracks = [], [], []
         for o in truth.obstacles:
             if o.kind != "person":

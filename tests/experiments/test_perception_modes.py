@@ -37,6 +37,19 @@ def test_oracle_sees_its_view_and_the_all_around_oracle_everything_in_range(mode
     np.testing.assert_allclose(next(o for o in out.obstacles if o.id == 1).velocity, [0.5, 0, 0])
 
 
+@pytest.mark.parametrize("half_view, seen", [(None, {1}), (30.0, set()), (100.0, {1, 3}), (180.0, {1, 2, 3})])
+def test_oracle_sees_people_in_the_view_it_is_given(half_view, seen):
+    # person 1 at 38.7 deg (its body reaches 33.4 deg), BEHIND at 180 deg, SIDE at 90 deg
+    p = OraclePerception(OracleConfig(half_view=half_view))
+    assert {o.id for o in p.update(FRAME, _truth(0.0, [(3.0, 2.4), BEHIND, SIDE])).obstacles} == seen
+
+
+@pytest.mark.parametrize("bad", [0.0, -10.0, 181.0, math.nan])
+def test_oracle_refuses_a_view_outside_0_to_180_degrees(bad):
+    with pytest.raises(ValueError, match="half_view must be in"):
+        OracleConfig(half_view=bad)
+
+
 def test_oracle_remembers_a_person_for_its_memory_only():
     p = OraclePerception(OracleConfig(memory=1.0))
     p.update(FRAME, _truth(0.0, [AHEAD]))
