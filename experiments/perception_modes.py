@@ -13,7 +13,8 @@ Modes:
   ``memory`` seconds after leaving it (perfect tracking through occlusion), with exact position,
   size and velocity, and the acceleration the true velocity shows over the last 0.1 s (a tracker's
   estimate, without its noise and lag). ``oracle.half_view`` widens (or narrows) the view it sees
-  people in: what a planner would gain from a wider camera, or from more of them.
+  people in: what a planner would gain from a wider camera, or from more of them; ``oracle.confirm_time``
+  reports a person coming into view only after that long in view, as a tracker confirms a new track.
 - ``oracle-360``: the same without the field of view: every person within ``max_range`` in any
   direction. Not a sensor anyone has; it measures the planner alone (with it, collisions are the
   planner's, since nothing comes from where the camera does not look).
@@ -213,6 +214,9 @@ class OracleConfig:
     # None: the camera's own (43.5 for the D435). What a wider camera, or more of them, would give a planner.
     half_view: float | None = None
     memory: float = 1.0  # s: a person out of view is still reported this long after last seen
+    # s: a person coming into view (unseen for longer than memory) is reported once this long has passed
+    # since, if still seen, like a tracker confirming a new track; 0: at once
+    confirm_time: float = 0.0
     # s: each person's acceleration is the change of its true velocity over this window (the truth holds
     # no acceleration); None: zero acceleration (constant-velocity predictions)
     accel_window: float | None = 0.1
@@ -226,9 +230,9 @@ class OracleConfig:
     def __post_init__(self):
         if not self.max_range > 0.0:
             raise ValueError(f"OracleConfig: max_range must be > 0, got {self.max_range}")
-        if not self.memory >= 0.0 or not self.velocity_noise >= 0.0:
-            raise ValueError(f"OracleConfig: memory and velocity_noise must be >= 0, got {self.memory} and "
-                             f"{self.velocity_noise}")
+        if not self.memory >= 0.0 or not self.velocity_noise >= 0.0 or not self.confirm_time >= 0.0:
+            raise ValueError(f"OracleConfig: memory, velocity_noise and confirm_time must be >= 0, got {self.memory}, "
+                             f"{self.velocity_noise} and {self.confirm_time}")
         if self.half_view is not None and not 0.0 < self.half_view <= 180.0:
             raise ValueError(f"OracleConfig: half_view must be in (0, 180] degrees (or none), got {self.half_view}")
         if self.accel_window is not None and not self.accel_window > 0.0:
@@ -251,6 +255,7 @@ class OraclePerception:
 
     def reset(self) -> None:
         self._last_seen: dict[int, float] = {}
+        self._first_seen: dict[int, float] = {}  # id -> when it came into view after being lost
         self._velocities: dict[int, deque] = {}  # id -> (stamp, true velocity) over accel_window
         self._noise: dict[int, tuple[np.random.Generator, float, np.ndarray]] = {}  # id -> (rng, stamp, error)
 
@@ -293,10 +298,14 @@ class OraclePerception:
             bearing, dist = bearing_and_distance(cam, heading, o.center)
             widen = math.atan2(0.5 * float(np.hypot(*o.size[:2])), max(dist, 1e-6))
             in_view = self.all_around or bearing <= half_fov + widen
-            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.cfg.max_range and in_view:
-                self._last_seen[o.id] = truth.stamp
             seen = self._last_seen.get(o.id)
+            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.cfg.max_range and in_view:
+                if seen is None or truth.stamp - seen > self.cfg.memory:
+                    self._first_seen[o.id] = truth.stamp
+                self._last_seen[o.id] = seen = truth.stamp
             if seen is None or truth.stamp - seen > self.cfg.memory:
+                continue
+            if seen - self._first_seen[o.id] < self.cfg.confirm_time - 1e-9:
                 continue
             preds.append(ObstaclePrediction(id=o.id, center=o.center.copy(), size=o.size.copy(),
                                             velocity=vel, acceleration=acc))

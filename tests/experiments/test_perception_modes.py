@@ -44,6 +44,17 @@ def test_oracle_sees_people_in_the_view_it_is_given(half_view, seen):
     assert {o.id for o in p.update(FRAME, _truth(0.0, [(3.0, 2.4), BEHIND, SIDE])).obstacles} == seen
 
 
+def test_oracle_reports_a_person_coming_into_view_once_confirmed():
+    p = OraclePerception(OracleConfig(memory=1.0, confirm_time=0.3))
+    ids = lambda t, where: [o.id for o in p.update(FRAME, _truth(t, [where])).obstacles]
+    assert ids(0.0, AHEAD) == [] and ids(0.2, AHEAD) == []  # in view for under 0.3 s
+    assert ids(0.3, AHEAD) == [1] and ids(1.2, BEHIND) == [1]  # confirmed, then remembered out of view
+    assert ids(1.5, BEHIND) == [] and ids(2.0, AHEAD) == []  # lost: a new sighting is confirmed again
+    assert ids(2.3, AHEAD) == [1]
+    with pytest.raises(ValueError, match="confirm_time must be >= 0"):
+        OracleConfig(confirm_time=-0.1)
+
+
 @pytest.mark.parametrize("bad", [0.0, -10.0, 181.0, math.nan])
 def test_oracle_refuses_a_view_outside_0_to_180_degrees(bad):
     with pytest.raises(ValueError, match="half_view must be in"):

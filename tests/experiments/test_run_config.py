@@ -126,8 +126,8 @@ def test_run_records_the_effective_configuration(tmp_path):
     assert c["set"] == {"episode.static_map": "truth", "episode.duration": 1.5, "shield.a_brake": 3.0,
                         "navigator.mpc.horizon": 20, "map.p_hit": 0.75, "oracle.max_range": 6,
                         "moving_rule.min_speed": 0.6}
-    assert c["oracle"] == {"max_range": 6.0, "half_view": None, "memory": 1.0, "accel_window": 0.1, "velocity_noise": 0.0,
-                           "noise_time": 0.5, "noise_seed": 0}
+    assert c["oracle"] == {"max_range": 6.0, "half_view": None, "memory": 1.0, "confirm_time": 0.0,
+                           "accel_window": 0.1, "velocity_noise": 0.0, "noise_time": 0.5, "noise_seed": 0}
     assert "moving_rule" not in c  # set, but the oracle does not use it
     assert c["shield"]["a_brake"] == 3.0 and c["shield"]["drone_radius"] > 0 and "v_max" in c["shield"]
     assert c["navigator"]["mpc"]["horizon"] == 20 and "cruise_speed" in c["navigator"]
