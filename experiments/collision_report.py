@@ -97,6 +97,11 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
     return rows
 
 
+def _centre_at(where: list[tuple[float, np.ndarray]], t: float) -> np.ndarray:
+    """The person's centre in the frame nearest to time t (``where``: frame time, centre)."""
+    return min(where, key=lambda w: abs(w[0] - t))[1]
+
+
 def _planner_knew(plans: list[dict], where: list[tuple[float, np.ndarray]], t: float, window: float) -> dict:
     """planner_knew and known_for of a person collision at t (module docstring), from the person's centre
     in the window's frames (``where``: frame time, centre); {} without threats or frames."""
@@ -104,7 +109,7 @@ def _planner_knew(plans: list[dict], where: list[tuple[float, np.ndarray]], t: f
         return {}
     known, stamps = [], []
     for p in (p for p in plans if t - window <= p["t"] <= t):
-        x, y = min(where, key=lambda w: abs(w[0] - p["t"]))[1]
+        x, y = _centre_at(where, p["t"])
         known.append(any(math.hypot(x - d[0], y - d[1]) <= d[2] for d in p["threats"]))
         stamps.append(p["t"])
     if not known:
@@ -124,7 +129,7 @@ def _forgot(plans: list[dict], where: list[tuple[float, np.ndarray]], t: float, 
             continue
         if p["t"] < t - window:
             break
-        x, y = min(where, key=lambda w: abs(w[0] - p["t"]))[1]
+        x, y = _centre_at(where, p["t"])
         near = [g for g in p["forgot"] if math.hypot(x - g[0], y - g[1]) <= lost_match]
         if near:
             return {"forgot": near[0][2], "forgot_s": round(t - p["t"], 2)}

@@ -296,10 +296,10 @@ class OraclePerception:
             vel = o.velocity + self._velocity_error(o.id, truth.stamp)
             # Seen when any part of the body is within the horizontal FOV cone and range.
             bearing, dist = bearing_and_distance(cam, heading, o.center)
-            widen = math.atan2(0.5 * float(np.hypot(*o.size[:2])), max(dist, 1e-6))
-            in_view = self.all_around or bearing <= half_fov + widen
+            radius = 0.5 * float(np.hypot(*o.size[:2]))
+            in_view = self.all_around or bearing <= half_fov + math.atan2(radius, max(dist, 1e-6))
             seen = self._last_seen.get(o.id)
-            if dist - 0.5 * float(np.hypot(*o.size[:2])) <= self.cfg.max_range and in_view:
+            if dist - radius <= self.cfg.max_range and in_view:
                 if seen is None or truth.stamp - seen > self.cfg.memory:
                     self._first_seen[o.id] = truth.stamp
                 self._last_seen[o.id] = seen = truth.stamp
