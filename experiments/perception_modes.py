@@ -14,7 +14,7 @@ Modes:
   size and velocity, and the acceleration the true velocity shows over the last 0.1 s (a tracker's
   estimate, without its noise and lag). ``oracle.half_view`` widens (or narrows) the view it sees
   people in: what a planner would gain from a wider camera, or from more of them; ``oracle.confirm_time``
-  reports a person coming into view only after that long in view, as a tracker confirms a new track.
+  reports a person coming into view only once that long has passed, as a tracker confirms a new track.
 - ``oracle-360``: the same without the field of view: every person within ``max_range`` in any
   direction. Not a sensor anyone has; it measures the planner alone (with it, collisions are the
   planner's, since nothing comes from where the camera does not look).
@@ -211,7 +211,8 @@ class OracleConfig:
 
     max_range: float = 5.0  # m: a person is seen within this horizontal distance of the camera (nearest side)
     # deg: half the horizontal view a person is seen in, about the camera's heading (180: all around);
-    # None: the camera's own (43.5 for the D435). What a wider camera, or more of them, would give a planner.
+    # None: the camera's own (39.7 for the simulated D435 at 640x480). What a wider camera, or more of them,
+    # would give a planner.
     half_view: float | None = None
     memory: float = 1.0  # s: a person out of view is still reported this long after last seen
     # s: a person coming into view (unseen for longer than memory) is reported once this long has passed
