@@ -222,6 +222,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
              "corridor": {"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
              "start": list(sc.drone.start), "goal": goal.tolist(), "map_resolution": vmap.cfg.resolution,
              "map_origin": list(vmap.cfg.origin),
+             "camera": {k: getattr(world.intrinsics, k) for k in ("width", "height", "fx", "fy", "cx", "cy")},
              "static": [o.to_json() for o in world.obstacle_truth() if o.kind == "static"],
              "people": [{"id": i, "height": round(w.height, 3), "sees_drone": bool(sees)}
                         for i, w, sees in zip(world.person_ids, world.walkers, world.crowd.sees)],

@@ -2,8 +2,9 @@
 
 Record kinds (field ``k``):
 - ``header``: scenario, seed, perception, planner, duration, rates, corridor {length, width,
-  height}, start, goal, map_resolution, map_origin, static (truth boxes: id, kind, label,
-  aabb_min, aabb_max), people [{id, height, sees_drone}].
+  height}, start, goal, map_resolution, map_origin, camera (its intrinsics: width, height, fx, fy,
+  cx, cy; logs written before 2026-11-27 have none), static (truth boxes: id, kind, label, aabb_min,
+  aabb_max), people [{id, height, sees_drone}].
 - ``s`` (every control period): t, drone position p, velocity v, reference position r,
   clearance c = [static, person, structure] (m, capped at 9).
 - ``f`` (every camera frame): t, drone position p, attitude R (3x3 row-major, body FLU -> world),

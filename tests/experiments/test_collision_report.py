@@ -3,9 +3,10 @@ import gzip
 import json
 
 import numpy as np
+import pytest
 
 from experiments.cli import main
-from experiments.collision_report import collision_rows
+from experiments.collision_report import collision_rows, half_view
 
 EYE = np.eye(3).ravel().tolist()  # heading +x
 
@@ -39,6 +40,22 @@ def test_rows_say_who_closed_in_and_whether_the_person_was_seen():
     assert collision_rows(_records(), window=0.9)[0]["in_view"] == 0.0  # only the last frames: out of view
     assert static["kind"] == "static" and "in_view" not in static
     assert person["off_heading"] == static["off_heading"] == 0.0  # flying where the camera looks
+
+
+def test_the_view_is_the_logged_cameras_and_the_default_cameras_without_one():
+    # a person 41 degrees off the heading: outside the default camera's 39.7 degree half view, inside a
+    # wider camera's
+    recs = _records()
+    off = (np.cos(np.radians(41.0)), -np.sin(np.radians(41.0)))
+    for r in recs:
+        if r["k"] == "f":
+            r["people"] = [_person(off, (0.0, 1.0))]
+            r["tracks"] = []
+    assert half_view(recs[0]) == pytest.approx(np.radians(39.69), abs=1e-3)
+    assert collision_rows(recs)[0]["in_view"] == 0.0
+    recs[0]["camera"] = {"width": 640, "height": 480, "fx": 300.0, "fy": 300.0, "cx": 320.0, "cy": 240.0}
+    assert half_view(recs[0]) == pytest.approx(np.arctan2(320.0, 300.0))
+    assert collision_rows(recs)[0]["in_view"] == 1.0
 
 
 def test_rows_give_the_fault_class_and_the_persons_lowest_speed():
