@@ -48,7 +48,9 @@ class NavigatorConfig:
     # far each bearing lies outside the half field of view less fov_margin, times its weight, plus a small
     # pull toward the motion.
     heading_look_time: float = 1.0  # s
-    camera_half_fov: float = 0.759  # rad: the D435's 43.5 degrees (sim/camera)
+    # rad: a real D435's 43.5 degrees, wider than the simulated camera's 39.7 (640x480, fx 387); less
+    # fov_margin, the rule keeps what it watches within 34.9 degrees, inside the view
+    camera_half_fov: float = 0.759
     fov_margin: float = 0.15  # rad
     watch_range: float = 3.0  # m
     # s: the obstacles are watched where they and the drone will be at these times (bearing from the drone's
