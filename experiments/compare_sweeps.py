@@ -6,7 +6,9 @@ older), so any change of the planner or the perception turns 10-45 of 200 seeds 
 success rates alone cannot tell a real gain from that churn. The paired question can: among the
 seeds whose outcome differs, are those turned to success more than a fair coin would give? That is
 McNemar's exact test, a two-sided sign test on the discordant seeds; seeds with the same outcome in
-both sweeps say nothing about the change and do not enter it.
+both sweeps say nothing about the change and do not enter it. The verdict is the success's; every
+outcome class (at-fault collision, timeout, ...) gets the same paired test beside its counts, so that
+a change that trades at-fault collisions for timeouts shows it.
 
 A sweep folder is what ``dodt-nav sweep --out`` writes; only its ``results.jsonl`` is read.
 """
@@ -39,6 +41,9 @@ class SweepComparison:
     only_in_base: int = 0
     only_in_new: int = 0
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    # per outcome class of counts, paired: (seeds with it in the baseline only, in the change only, the
+    # sign test's p on those): whether the change moved that class beyond the churn
+    changes: dict = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -118,16 +123,21 @@ def compare_sweeps(base: str | Path, new: str | Path) -> SweepComparison:
     ok_b = {s: bool(b[s].get("success")) for s in common}
     up = tuple(s for s in common if ok_b[s] and not ok_a[s])
     down = tuple((s, str(b[s].get("failure_reason") or "failed")) for s in common if ok_a[s] and not ok_b[s])
-    counts = {k: (sum(bool(a[s].get(f, a[s].get("collided") if f == "at_fault" else False)) for s in common),
-                  sum(bool(b[s].get(f, b[s].get("collided") if f == "at_fault" else False)) for s in common))
-              for k, f in (("at-fault collision", "at_fault"), ("only not-at-fault collisions", "not_at_fault_only"),
-                           ("collision", "collided"), ("timeout", "timeout"))}
+    counts, changes = {}, {}
+    for k, f in (("at-fault collision", "at_fault"), ("only not-at-fault collisions", "not_at_fault_only"),
+                 ("collision", "collided"), ("timeout", "timeout")):
+        has = lambda row: bool(row.get(f, row.get("collided") if f == "at_fault" else False))  # noqa: E731
+        in_a, in_b = {s for s in common if has(a[s])}, {s for s in common if has(b[s])}
+        counts[k] = (len(in_a), len(in_b))
+        gone, new_ = len(in_a - in_b), len(in_b - in_a)
+        changes[k] = (gone, new_, sign_test_p(gone, gone + new_))
     return SweepComparison(
         base=str(base), new=str(new), seeds=tuple(common), base_success=sum(ok_a.values()),
         new_success=sum(ok_b.values()), to_success=up, to_failure=down,
         p_value=sign_test_p(len(up), len(up) + len(down)), counts=counts,
         median_speed=(_median_speed(a[s] for s in common), _median_speed(b[s] for s in common)),
-        only_in_base=len(set(a) - set(b)), only_in_new=len(set(b) - set(a)), warnings=tuple(warnings))
+        only_in_base=len(set(a) - set(b)), only_in_new=len(set(b) - set(a)), warnings=tuple(warnings),
+        changes=changes)
 
 
 def format_comparison(c: SweepComparison) -> str:
@@ -136,13 +146,15 @@ def format_comparison(c: SweepComparison) -> str:
     lines = [f"{n} seeds in both sweeps" + (f" ({c.only_in_base} only in the baseline, {c.only_in_new} only in the "
                                              f"change, left out)" if c.only_in_base or c.only_in_new else ""),
              "",
-             "| | baseline | change |",
-             "| --- | --- | --- |",
-             f"| success | {pct(c.base_success)} | {pct(c.new_success)} |"]
+             "| | baseline | change | seeds: baseline only / change only, sign test p |",
+             "| --- | --- | --- | --- |",
+             f"| success | {pct(c.base_success)} | {pct(c.new_success)} | {len(c.to_failure)} / {len(c.to_success)}, "
+             f"p = {c.p_value:.3g} |"]
     for k, (x, y) in c.counts.items():
-        lines.append(f"| {k} | {pct(x)} | {pct(y)} |")
+        gone, new_, p = c.changes.get(k, (None, None, None))
+        lines.append(f"| {k} | {pct(x)} | {pct(y)} | " + ("" if p is None else f"{gone} / {new_}, p = {p:.3g}") + " |")
     fmt = lambda v: "-" if v is None else f"{v:.2f} m/s"  # noqa: E731
-    lines += [f"| median speed of successes | {fmt(c.median_speed[0])} | {fmt(c.median_speed[1])} |", "",
+    lines += [f"| median speed of successes | {fmt(c.median_speed[0])} | {fmt(c.median_speed[1])} | |", "",
               f"turned to success ({len(c.to_success)}): " + (", ".join(map(str, c.to_success)) or "none"),
               f"turned to failure ({len(c.to_failure)}): "
               + (", ".join(f"{s} ({why})" for s, why in c.to_failure) or "none"),

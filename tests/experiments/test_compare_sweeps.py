@@ -61,8 +61,13 @@ def test_seeds_are_paired_and_only_the_changed_ones_count(tmp_path):
     assert c.counts == {"collision": (10, 0), "at-fault collision": (10, 0), "only not-at-fault collisions": (0, 0),
                         "timeout": (0, 1)}
     assert c.verdict.startswith("better")
+    # each outcome class paired the same way: seeds with it in the baseline only, in the change only, p
+    assert c.changes["at-fault collision"] == (10, 0, pytest.approx(2 / 1024))
+    assert c.changes["timeout"] == (0, 1, 1.0) and c.changes["only not-at-fault collisions"] == (0, 0, 1.0)
     text = format_comparison(c)
     assert "turned to failure (1): 20 (timeout)" in text and "1 only in the baseline" in text
+    assert "| success | 30 (75.0 %) | 39 (97.5 %) | 1 / 10, p = 0.0117 |" in text
+    assert "| at-fault collision | 10 (25.0 %) | 0 (0.0 %) | 10 / 0, p = 0.00195 |" in text
     # the same seeds the other way round: worse, same p
     r = compare_sweeps(tmp_path / "b" / "results.jsonl", tmp_path / "a")
     assert r.verdict.startswith("worse") and r.p_value == c.p_value
