@@ -8,18 +8,20 @@ seeds whose outcome differs, are those turned to success more than a fair coin w
 McNemar's exact test, a two-sided sign test on the discordant seeds; seeds with the same outcome in
 both sweeps say nothing about the change and do not enter it. The verdict is the success's; every
 outcome class (at-fault collision, timeout, ...) gets the same paired test beside its counts, so that
-a change that trades at-fault collisions for timeouts shows it.
+a change that trades at-fault collisions for timeouts shows it, and a 95 % interval of the change in
+its rate (Newcombe's paired score interval, ``paired_interval``).
 
 A sweep folder is what ``dodt-nav sweep --out`` writes; only its ``results.jsonl`` is read.
 """
 from __future__ import annotations
 
+import math
 import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from experiments.environment import differences, distinct
-from experiments.sweep import RESULTS, read_results
+from experiments.sweep import RESULTS, read_results, wilson
 
 
 class CompareError(ValueError):
@@ -41,8 +43,8 @@ class SweepComparison:
     only_in_base: int = 0
     only_in_new: int = 0
     warnings: tuple[str, ...] = field(default_factory=tuple)
-    # per outcome class of counts, paired: (seeds with it in the baseline only, in the change only, the
-    # sign test's p on those): whether the change moved that class beyond the churn
+    # per outcome class of counts, and "success", paired: (seeds with it in the baseline only, in the
+    # change only, the sign test's p on those, paired_interval's (difference, low, high) of its rate)
     changes: dict = field(default_factory=dict)
 
     @property
@@ -59,6 +61,30 @@ def sign_test_p(k: int, n: int) -> float:
     from scipy.stats import binomtest  # half a second to import: only when a test is made
 
     return float(binomtest(k, n, 0.5).pvalue)
+
+
+def paired_interval(both: int, only_new: int, only_base: int, neither: int,
+                    confidence: float = 0.95) -> tuple[float, float, float]:
+    """(difference, low, high): the change's rate of an outcome less the baseline's, over paired seeds
+    (``both``: seeds with the outcome in both sweeps, ``only_new`` / ``only_base``: in one, ``neither``),
+    with Newcombe's score interval for paired proportions (Statistics in Medicine 17, 1998, method 10):
+    each sweep's Wilson interval, combined with the correlation of the pairs."""
+    n = both + only_new + only_base + neither
+    if n == 0:
+        return 0.0, -1.0, 1.0
+    p1, p2 = (both + only_new) / n, (both + only_base) / n
+    l1, u1 = wilson(both + only_new, n, confidence)
+    l2, u2 = wilson(both + only_base, n, confidence)
+    margins = (both + only_new) * (only_base + neither) * (both + only_base) * (only_new + neither)
+    phi = 0.0
+    if margins > 0:
+        b = both * neither - only_new * only_base
+        c = b - n / 2 if b > n / 2 else (b if b < 0 else 0.0)  # Newcombe's continuity correction
+        phi = c / math.sqrt(margins)
+    d = p1 - p2
+    low = d - math.sqrt(max(0.0, (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2))
+    high = d + math.sqrt(max(0.0, (p2 - l2) ** 2 - 2 * phi * (p2 - l2) * (u1 - p1) + (u1 - p1) ** 2))
+    return d, max(-1.0, low), min(1.0, high)
 
 
 def verdict(up: int, down: int, p: float, alpha: float = 0.05) -> str:
@@ -124,13 +150,15 @@ def compare_sweeps(base: str | Path, new: str | Path) -> SweepComparison:
     up = tuple(s for s in common if ok_b[s] and not ok_a[s])
     down = tuple((s, str(b[s].get("failure_reason") or "failed")) for s in common if ok_a[s] and not ok_b[s])
     counts, changes = {}, {}
-    for k, f in (("at-fault collision", "at_fault"), ("only not-at-fault collisions", "not_at_fault_only"),
-                 ("collision", "collided"), ("timeout", "timeout")):
+    for k, f in (("success", "success"), ("at-fault collision", "at_fault"),
+                 ("only not-at-fault collisions", "not_at_fault_only"), ("collision", "collided"), ("timeout", "timeout")):
         has = lambda row: bool(row.get(f, row.get("collided") if f == "at_fault" else False))  # noqa: E731
         in_a, in_b = {s for s in common if has(a[s])}, {s for s in common if has(b[s])}
-        counts[k] = (len(in_a), len(in_b))
+        if k != "success":
+            counts[k] = (len(in_a), len(in_b))
         gone, new_ = len(in_a - in_b), len(in_b - in_a)
-        changes[k] = (gone, new_, sign_test_p(gone, gone + new_))
+        changes[k] = (gone, new_, sign_test_p(gone, gone + new_),
+                      paired_interval(len(in_a & in_b), new_, gone, len(common) - len(in_a | in_b)))
     return SweepComparison(
         base=str(base), new=str(new), seeds=tuple(common), base_success=sum(ok_a.values()),
         new_success=sum(ok_b.values()), to_success=up, to_failure=down,
@@ -146,15 +174,21 @@ def format_comparison(c: SweepComparison) -> str:
     lines = [f"{n} seeds in both sweeps" + (f" ({c.only_in_base} only in the baseline, {c.only_in_new} only in the "
                                              f"change, left out)" if c.only_in_base or c.only_in_new else ""),
              "",
-             "| | baseline | change | seeds: baseline only / change only, sign test p |",
-             "| --- | --- | --- | --- |",
-             f"| success | {pct(c.base_success)} | {pct(c.new_success)} | {len(c.to_failure)} / {len(c.to_success)}, "
-             f"p = {c.p_value:.3g} |"]
+             "| | baseline | change | change - baseline [95 % interval] | seeds: baseline only / change only, "
+             "sign test p |",
+             "| --- | --- | --- | --- | --- |"]
+
+    def cells(k):
+        if k not in c.changes:
+            return " | |"
+        gone, new_, p, (d, lo, hi) = c.changes[k]
+        return f" | {100 * d:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] points | {gone} / {new_}, p = {p:.3g} |"
+
+    lines.append(f"| success | {pct(c.base_success)} | {pct(c.new_success)}" + cells("success"))
     for k, (x, y) in c.counts.items():
-        gone, new_, p = c.changes.get(k, (None, None, None))
-        lines.append(f"| {k} | {pct(x)} | {pct(y)} | " + ("" if p is None else f"{gone} / {new_}, p = {p:.3g}") + " |")
+        lines.append(f"| {k} | {pct(x)} | {pct(y)}" + cells(k))
     fmt = lambda v: "-" if v is None else f"{v:.2f} m/s"  # noqa: E731
-    lines += [f"| median speed of successes | {fmt(c.median_speed[0])} | {fmt(c.median_speed[1])} | |", "",
+    lines += [f"| median speed of successes | {fmt(c.median_speed[0])} | {fmt(c.median_speed[1])} | | |", "",
               f"turned to success ({len(c.to_success)}): " + (", ".join(map(str, c.to_success)) or "none"),
               f"turned to failure ({len(c.to_failure)}): "
               + (", ".join(f"{s} ({why})" for s, why in c.to_failure) or "none"),
@@ -165,4 +199,5 @@ def format_comparison(c: SweepComparison) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CompareError", "SweepComparison", "compare_sweeps", "format_comparison", "sign_test_p", "verdict"]
+__all__ = ["CompareError", "SweepComparison", "compare_sweeps", "format_comparison", "paired_interval", "sign_test_p",
+           "verdict"]

@@ -1,10 +1,11 @@
 """dodt-nav compare: two sweeps paired seed by seed, the exact sign test, the regression gate."""
 import json
+import math
 
 import pytest
 
 from experiments.cli import main
-from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison, sign_test_p
+from experiments.compare_sweeps import CompareError, compare_sweeps, format_comparison, paired_interval, sign_test_p
 
 
 ENV = {"python": "3.11.7", "packages": {"numpy": "2.4.6", "numba": "0.68.1"}, "cpu": "znver5",
@@ -40,6 +41,30 @@ def test_sign_test_is_the_exact_two_sided_binomial_test(k, n, expected):
     assert sign_test_p(k, n) == pytest.approx(expected, rel=1e-12)
 
 
+def test_paired_interval_is_the_wald_interval_for_many_seeds_and_mirrors_when_swapped():
+    # 2000 seeds, 400 changed (230 up, 170 down): Newcombe's interval is close to the Wald one
+    d, lo, hi = paired_interval(1000, 230, 170, 600)
+    n, up, down = 2000, 230, 170
+    se = math.sqrt(up + down - (up - down) ** 2 / n) / n
+    assert d == pytest.approx((up - down) / n)
+    assert lo == pytest.approx(d - 1.96 * se, abs=0.002) and hi == pytest.approx(d + 1.96 * se, abs=0.002)
+    # the sweeps swapped: the same interval, mirrored
+    d2, lo2, hi2 = paired_interval(1000, 170, 230, 600)
+    assert (d2, lo2, hi2) == pytest.approx((-d, -hi, -lo))
+
+
+@pytest.mark.parametrize("both,up,down,neither", [(30, 0, 0, 10), (29, 10, 1, 0), (0, 0, 0, 5), (5, 5, 0, 0),
+                                                   (0, 3, 4, 0)])
+def test_paired_interval_holds_the_difference_within_minus_one_to_one(both, up, down, neither):
+    d, lo, hi = paired_interval(both, up, down, neither)
+    assert -1.0 <= lo <= d <= hi <= 1.0 and lo < hi
+
+
+def test_paired_interval_excludes_zero_where_the_sign_test_rejects_and_not_where_it_does_not():
+    assert paired_interval(29, 10, 1, 0)[1] > 0  # 10 of 11 changed seeds up, 40 seeds: p = 0.0117
+    assert paired_interval(100, 12, 8, 80)[1] < 0 < paired_interval(100, 12, 8, 80)[2]  # p = 0.50
+
+
 def test_sign_test_rejects_impossible_counts():
     with pytest.raises(ValueError, match="k must lie"):
         sign_test_p(5, 3)
@@ -62,12 +87,15 @@ def test_seeds_are_paired_and_only_the_changed_ones_count(tmp_path):
                         "timeout": (0, 1)}
     assert c.verdict.startswith("better")
     # each outcome class paired the same way: seeds with it in the baseline only, in the change only, p
-    assert c.changes["at-fault collision"] == (10, 0, pytest.approx(2 / 1024))
-    assert c.changes["timeout"] == (0, 1, 1.0) and c.changes["only not-at-fault collisions"] == (0, 0, 1.0)
+    assert c.changes["at-fault collision"][:3] == (10, 0, pytest.approx(2 / 1024))
+    assert c.changes["timeout"][:3] == (0, 1, 1.0) and c.changes["only not-at-fault collisions"][:3] == (0, 0, 1.0)
+    assert c.changes["success"][:3] == (1, 10, pytest.approx(3 / 256))
+    d, lo, hi = c.changes["at-fault collision"][3]
+    assert d == pytest.approx(-0.25) and lo < d < hi < 0  # 25 % fewer, an interval clear of zero
     text = format_comparison(c)
     assert "turned to failure (1): 20 (timeout)" in text and "1 only in the baseline" in text
-    assert "| success | 30 (75.0 %) | 39 (97.5 %) | 1 / 10, p = 0.0117 |" in text
-    assert "| at-fault collision | 10 (25.0 %) | 0 (0.0 %) | 10 / 0, p = 0.00195 |" in text
+    assert "| success | 30 (75.0 %) | 39 (97.5 %) | +22.5 [" in text and "points | 1 / 10, p = 0.0117 |" in text
+    assert "| at-fault collision | 10 (25.0 %) | 0 (0.0 %) | -25.0 [" in text and "| 10 / 0, p = 0.00195 |" in text
     # the same seeds the other way round: worse, same p
     r = compare_sweeps(tmp_path / "b" / "results.jsonl", tmp_path / "a")
     assert r.verdict.startswith("worse") and r.p_value == c.p_value
