@@ -159,6 +159,11 @@ class KalmanConfig:
     turn_window: float = 1.0  # s
     turn_min_speed: float = 0.3  # m/s; slower, the heading says little
     q_white: float = 4.0  # (m/s^3)^2 s for CA, (m/s^2)^2 s for CV, with measurement = "position"
+    # ours: a detection cut by the image's left or right edge is measured from its side inside the
+    # view, at the distance from that side to the anchor measured while the whole obstacle was in
+    # view, or this half width (m) for a track that has not been seen whole (dodt.view_edge); 0: the
+    # cut detection's own anchor (the paper)
+    cut_half_width: float = 0.25
 
 
 @dataclass(frozen=True)

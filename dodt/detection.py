@@ -5,6 +5,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dodt.view_edge import ViewSides
+
 
 @dataclass(eq=False)
 class Detection:
@@ -14,6 +16,7 @@ class Detection:
     points: np.ndarray = field(default_factory=lambda: np.empty((0, 3), np.float32))  # (M, 3) world
     is_person: bool = False  # set by a learned detector that recognises people
     cut: bool = False  # its box crosses the image's left or right edge (set by the pipeline)
+    sides: "ViewSides | None" = None  # its sides and the image edges that cut it (dodt.view_edge; the pipeline)
 
     @property
     def lower(self) -> np.ndarray:

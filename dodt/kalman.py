@@ -70,18 +70,21 @@ class KalmanFilter:
         self.x = F @ self.x
         self.P = F @ self.P @ F.T + self.Q_for(dt, q_scale)
 
-    def update(self, z: np.ndarray, window: float = 1.0) -> None:
+    def update(self, z: np.ndarray, window: float = 1.0, weak_axis: np.ndarray | None = None,
+               weak_factor: float = 1.0) -> None:
         """Update with z = [x, y, vx, vy, (ax, ay)], or only [x, y] when measuring position.
 
         ``window`` in (0, 1]: the pseudo-measurements' span over the full averaging window. A
         finite difference over a fraction w of it is 1/w times noisier in velocity and 1/w^2 in
         acceleration, so their R entries grow by 1/w^2 and 1/w^4 (ours: the reference code
         uses one R from the first frame on, and a young track overshoots).
+        ``weak_axis``: a horizontal unit vector along which every measured quantity's variance is
+        ``weak_factor`` times larger (a detection whose extent along it is unsure).
         """
         z = np.asarray(z, float)
         if self.cfg.measurement == "position":
             H = self.H[:2]
-            R = self.R[:2, :2]
+            R = self.R[:2, :2].copy()
             z = z[:2]
         else:
             H, R = self.H, self.R.copy()
@@ -90,6 +93,11 @@ class KalmanFilter:
             R[2:4, 2:4] /= w * w
             if self.ca:
                 R[4:6, 4:6] /= w**4
+        if weak_axis is not None and weak_factor != 1.0:
+            a = np.asarray(weak_axis, float)
+            stretch = np.eye(2) + (weak_factor - 1.0) * np.outer(a, a)  # eigenvalue weak_factor along a, 1 across
+            for i in range(0, len(z), 2):
+                R[i:i + 2, i:i + 2] = R[i, i] * stretch  # the blocks are isotropic: r I
         if H is self.H:  # H = I: the same formulas without the products by H
             y = z - self.x
             K = np.linalg.solve(self.P + R, self.P).T

@@ -36,6 +36,7 @@ from dodt.pointcloud import VoxelCloud
 from dodt.result import PerceptionResult
 from dodt.tracker import Tracker
 from dodt.udepth import UDepthDetector
+from dodt.view_edge import view_sides
 
 MODULES = ("point_cloud", "udepth", "dbscan", "ensemble", "learned", "association", "kalman", "identification")
 
@@ -180,6 +181,9 @@ class DODT:
                 d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
         if self.learned_detector is not None and not self.cfg.learned.cut_boxes_vote:
             mark_cut(dets, frame.intrinsics, T)
+        if self.cfg.kalman.cut_half_width > 0:
+            for d in dets:
+                d.sides = view_sides(d.points, frame.intrinsics, T, self.cfg.depth.margin, self.cfg.voxel.resolution)
         t5 = time.perf_counter()
         timings.update(udepth=(t1 - t0) * 1e3, dbscan=(t2 - t1) * 1e3, ensemble=(t3 - t2 + t5 - t4) * 1e3,
                        learned=(t4 - t3) * 1e3 if self.learned_detector is not None else 0.0)

@@ -31,6 +31,11 @@ from dodt.result import TrackedObstacle
 from dodt.windows import FrameClock, blend, keep_last
 
 
+# times the measurement variance along the line of sight of a detection cut by the image's side
+# (dodt.view_edge): its visible part's mean depth moves as more or less of it is in view
+CUT_RANGE_NOISE = 5.0
+
+
 @dataclass
 class _Observation:
     seq: int
@@ -71,13 +76,20 @@ class Track:
         self.id = tid
         self.cfg = cfg
         self.clock = clock or FrameClock(cfg.reference_rate)
-        anchor = _anchor(det, cfg.kalman.position_source)
-        self.offset = det.center[:2] - anchor  # box centre relative to the measured point
+        # m: lateral distances from the anchor to the obstacle's left and right sides, measured while
+        # it was wholly in view (dodt.view_edge); None until then
+        self.side_widths: np.ndarray | None = None
+        anchor = self._measured_anchor(det)
+        cut = self._cut(det)
+        # box centre relative to the measured point (a cut box's centre is not the obstacle's)
+        self.offset = np.zeros(2) if cut else det.center[:2] - anchor
         self.kf = KalmanFilter(cfg.kalman, anchor)
         self.born = stamp
         self.last_seen = stamp
         self.z = float(det.center[2])
         self.size = det.size.copy()  # smoothed, for the output
+        if cut:  # at least the assumed width across
+            np.maximum(self.size[:2], 2 * cfg.kalman.cut_half_width, out=self.size[:2])
         self.det_size = det.size.copy()  # the latest detection's, for association
         self.count, self.spread = features(det)
         # The histories hold what their windows (spans of time, as frames at the current frame
@@ -191,6 +203,31 @@ class Track:
         c, s_ = math.cos(ang), math.sin(ang)
         return np.array([c * v[0] - s_ * v[1], s_ * v[0] + c * v[1]])
 
+    def _cut(self, det: Detection) -> bool:
+        """Whether the detection is measured from its side in view (one image edge cuts it)."""
+        return self.cfg.kalman.cut_half_width > 0 and det.sides is not None and det.sides.cut in (-1, 1)
+
+    def _measured_anchor(self, det: Detection) -> np.ndarray:
+        """The point the filter measures (_anchor). Of a detection cut by one side of the image, the
+        anchor is moved across the line of sight to where the side in view puts it; a detection wholly
+        in view updates the side widths that takes (dodt.view_edge)."""
+        anchor = _anchor(det, self.cfg.kalman.position_source)
+        s, half = det.sides, self.cfg.kalman.cut_half_width
+        if s is None or not half > 0 or s.cut == 2:
+            return anchor
+        a = s.lateral(anchor)
+        if s.cut == 0:
+            widths = np.array([a - s.low, s.high - a])
+            if self.side_widths is None:
+                self.side_widths = widths
+            else:
+                w = blend(self.cfg.track.size_smoothing, self.clock.steps(self.clock.period))
+                self.side_widths = (1 - w) * self.side_widths + w * widths
+            return anchor
+        widths = self.side_widths if self.side_widths is not None else (half, half)
+        target = s.high - widths[1] if s.cut < 0 else s.low + widths[0]  # from the side in view
+        return anchor + (target - a) * s.axis
+
     def _vote_person(self, det: Detection) -> None:
         """Count whether the detection is a person box, unless it is cut by the view's side
         (learned.cut_boxes_vote)."""
@@ -208,14 +245,16 @@ class Track:
         # learned box's anchor (depths lifted from the box) sits apart from the same person's cluster
         # of points, and a track switching between them would read that offset as motion
         lifted = det.source == "learned"
+        cut = self._cut(det)
         if k.same_kind_differences:
             first = next((i for i in range(first, len(obs)) if obs[i].lifted == lifted), first)
         prev = obs[first]
         dt = stamp - prev.stamp
-        anchor = _anchor(det, k.position_source)
+        anchor = self._measured_anchor(det)
         per_frame = self.clock.steps(self.clock.period)  # reference frames per frame
-        w_off = blend(0.3, per_frame)
-        self.offset = (1 - w_off) * self.offset + w_off * (det.center[:2] - anchor)
+        if not cut:
+            w_off = blend(0.3, per_frame)
+            self.offset = (1 - w_off) * self.offset + w_off * (det.center[:2] - anchor)
         if dt > 1e-6:
             v = (anchor - prev.center[:2]) / dt
             v = self._turn_compensated(v, stamp, dt)
@@ -225,13 +264,19 @@ class Track:
         # (the filter's own estimate, so the update adds no innovation there).
         a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
         window = (len(obs) - first) / n_avg  # observations spanned / full window
-        self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window)
+        # a cut detection's range is unsure: its visible part's depth changes with how much is in view
+        ray = None if not cut else np.array([-det.sides.axis[1], det.sides.axis[0]])
+        self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window, weak_axis=ray,
+                       weak_factor=CUT_RANGE_NOISE)
         self.observations.append(_Observation(seq, stamp, anchor.copy(), v, lifted))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
         # which then cannot follow a person whose box changes as they turn or swing their arms).
         w_new = blend(self.cfg.track.size_smoothing, per_frame)
-        self.size = (1 - w_new) * self.size + w_new * det.size
+        if cut:  # a cut box is narrower than its obstacle: only the height is measured
+            self.size[2] = (1 - w_new) * self.size[2] + w_new * det.size[2]
+        else:
+            self.size = (1 - w_new) * self.size + w_new * det.size
         self.det_size = det.size.copy()
         self.count, self.spread = features(det)
         self.clouds.append((seq, stamp, det.points))

@@ -158,6 +158,26 @@ def test_first_update_by_hand():
     np.testing.assert_allclose(kf.P, np.diag(cfg.p0 * r / (cfg.p0 + r)))
 
 
+def test_weak_axis_update_by_hand():
+    """A weak axis multiplies R along it by weak_factor: rotated to that axis, the gain is
+    P / (P + factor r) along it and P / (P + r) across it, per quantity."""
+    cfg = KalmanConfig(model="ca")
+    axis = np.array([np.cos(0.5), np.sin(0.5)])
+    across = np.array([-axis[1], axis[0]])
+    z = np.array([0.2, -0.1, 1.0, 0.5, 0.3, -0.3])
+    kf = KalmanFilter(cfg, np.zeros(2))
+    kf.update(z, weak_axis=axis, weak_factor=100.0)
+    for i, r in ((0, cfg.r_pos), (2, cfg.r_vel), (4, cfg.r_acc)):
+        along, side = kf.x[i:i + 2] @ axis, kf.x[i:i + 2] @ across
+        assert along == pytest.approx(cfg.p0 / (cfg.p0 + 100.0 * r) * (z[i:i + 2] @ axis))
+        assert side == pytest.approx(cfg.p0 / (cfg.p0 + r) * (z[i:i + 2] @ across))
+    plain = KalmanFilter(cfg, np.zeros(2))
+    plain.update(z, weak_axis=axis, weak_factor=1.0)
+    ref = KalmanFilter(cfg, np.zeros(2))
+    ref.update(z)
+    np.testing.assert_array_equal(plain.x, ref.x)
+
+
 def test_cv_filter_ignores_the_acceleration_measurement():
     a = KalmanFilter(KalmanConfig(model="cv"), np.zeros(2))
     b = KalmanFilter(KalmanConfig(model="cv"), np.zeros(2))
