@@ -63,6 +63,11 @@ def _iou_matrix(ca, sa, cb, sb):
     return out
 
 
+def half_view(K: CameraIntrinsics) -> float:
+    """Half the camera's horizontal field of view [rad], to the wider of the image's sides."""
+    return math.atan2(max(K.cx, K.width - K.cx), K.fx)
+
+
 def in_field_of_view(points_world: np.ndarray, T_world_camera: np.ndarray, K: CameraIntrinsics,
                      max_depth: float, margin_px: float = 0.0) -> np.ndarray:
     """Mask of the points that project inside the image of a camera at T_world_camera.

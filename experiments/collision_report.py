@@ -30,16 +30,16 @@ from pathlib import Path
 import numpy as np
 
 from dodt.frames import CameraIntrinsics
-from dodt.geometry import wrap_angle
+from dodt.geometry import half_view, wrap_angle
 from experiments.fault import AT_REST_SPEED, classify
 
 
-def half_view(header: dict) -> float:
+def logged_half_view(header: dict) -> float:
     """The camera's horizontal half field of view (rad) from a log header's intrinsics; a log without
     them (written before 2026-11-27) was flown with the default camera (dodt.frames.CameraIntrinsics:
     the simulated D435 at 640x480, 39.7 degrees)."""
-    K = CameraIntrinsics(**header["camera"]) if isinstance(header.get("camera"), dict) else CameraIntrinsics()
-    return math.atan2(max(K.cx, K.width - K.cx), K.fx)
+    return half_view(CameraIntrinsics(**header["camera"]) if isinstance(header.get("camera"), dict)
+                     else CameraIntrinsics())
 
 
 def _centre(person: dict) -> np.ndarray:
@@ -55,10 +55,10 @@ def _heading(frame: dict) -> float:
 def collision_rows(records: list[dict], window: float = 2.0, view_range: float = 5.0, match: float = 0.5,
                    half_fov: float | None = None, lost_match: float = 1.2) -> list[dict]:
     """The collisions of one episode's records, as dicts (see the module docstring). ``half_fov``
-    (rad): the camera's half view; None: the logged camera's (half_view)."""
+    (rad): the camera's half view; None: the logged camera's (logged_half_view)."""
     header = records[0]
     if half_fov is None:
-        half_fov = half_view(header)
+        half_fov = logged_half_view(header)
     states = [r for r in records if r["k"] == "s"]
     frames = [r for r in records if r["k"] == "f"]
     plans = [r for r in records if r["k"] == "plan" and "threats" in r]

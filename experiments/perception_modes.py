@@ -33,7 +33,7 @@ import numpy as np
 
 from dodt.config import DODTConfig
 from dodt.frames import SensorFrame
-from dodt.geometry import wrap_angle
+from dodt.geometry import half_view, wrap_angle
 from dodt.pipeline import DODT
 from dodt.presets import PRESETS, preset
 from dodt.protocol import PerceptionModule, PerceptionOutput  # also importable from here, as before
@@ -53,7 +53,7 @@ def known_modes() -> tuple[str, ...]:
 def horizontal_view(T_world_camera: np.ndarray, K) -> tuple[np.ndarray, float, float]:
     """(camera position (3,), heading [rad], half horizontal field of view [rad]) of a forward camera."""
     fwd = T_world_camera[:3, 2]
-    return T_world_camera[:3, 3], math.atan2(fwd[1], fwd[0]), math.atan2(max(K.cx, K.width - K.cx), K.fx)
+    return T_world_camera[:3, 3], math.atan2(fwd[1], fwd[0]), half_view(K)
 
 
 def bearing_and_distance(cam: np.ndarray, heading: float, xy) -> tuple[float, float]:

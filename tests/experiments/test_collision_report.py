@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from experiments.cli import main
-from experiments.collision_report import collision_rows, half_view
+from experiments.collision_report import collision_rows, logged_half_view
 
 EYE = np.eye(3).ravel().tolist()  # heading +x
 
@@ -51,10 +51,10 @@ def test_the_view_is_the_logged_cameras_and_the_default_cameras_without_one():
         if r["k"] == "f":
             r["people"] = [_person(off, (0.0, 1.0))]
             r["tracks"] = []
-    assert half_view(recs[0]) == pytest.approx(np.radians(39.69), abs=1e-3)
+    assert logged_half_view(recs[0]) == pytest.approx(np.radians(39.69), abs=1e-3)
     assert collision_rows(recs)[0]["in_view"] == 0.0
     recs[0]["camera"] = {"width": 640, "height": 480, "fx": 300.0, "fy": 300.0, "cx": 320.0, "cy": 240.0}
-    assert half_view(recs[0]) == pytest.approx(np.arctan2(320.0, 300.0))
+    assert logged_half_view(recs[0]) == pytest.approx(np.arctan2(320.0, 300.0))
     assert collision_rows(recs)[0]["in_view"] == 1.0
 
 
