@@ -79,8 +79,7 @@ class Track:
         # m: lateral distances from the anchor to the obstacle's left and right sides, measured while
         # it was wholly in view (dodt.view_edge); None until then
         self.side_widths: np.ndarray | None = None
-        anchor = self._measured_anchor(det)
-        cut = self._cut(det)
+        anchor, cut = self._measure(det)
         # box centre relative to the measured point (a cut box's centre is not the obstacle's)
         self.offset = np.zeros(2) if cut else det.center[:2] - anchor
         self.kf = KalmanFilter(cfg.kalman, anchor)
@@ -203,18 +202,16 @@ class Track:
         c, s_ = math.cos(ang), math.sin(ang)
         return np.array([c * v[0] - s_ * v[1], s_ * v[0] + c * v[1]])
 
-    def _cut(self, det: Detection) -> bool:
-        """Whether the detection is measured from its side in view (one image edge cuts it)."""
-        return self.cfg.kalman.cut_half_width > 0 and det.sides is not None and det.sides.cut in (-1, 1)
+    def _measure(self, det: Detection) -> tuple[np.ndarray, bool]:
+        """(the point the filter measures, whether it was measured from a cut detection's side in view).
 
-    def _measured_anchor(self, det: Detection) -> np.ndarray:
-        """The point the filter measures (_anchor). Of a detection cut by one side of the image, the
-        anchor is moved across the line of sight to where the side in view puts it; a detection wholly
-        in view updates the side widths that takes (dodt.view_edge)."""
+        The point is _anchor's. Of a detection cut by one side of the image, it is moved across the line
+        of sight to where the side in view puts it; a detection wholly in view updates the side widths
+        that takes (dodt.view_edge)."""
         anchor = _anchor(det, self.cfg.kalman.position_source)
         s, half = det.sides, self.cfg.kalman.cut_half_width
         if s is None or not half > 0 or s.cut == 2:
-            return anchor
+            return anchor, False
         a = s.lateral(anchor)
         if s.cut == 0:
             widths = np.array([a - s.low, s.high - a])
@@ -223,10 +220,10 @@ class Track:
             else:
                 w = blend(self.cfg.track.size_smoothing, self.clock.steps(self.clock.period))
                 self.side_widths = (1 - w) * self.side_widths + w * widths
-            return anchor
+            return anchor, False
         widths = self.side_widths if self.side_widths is not None else (half, half)
         target = s.high - widths[1] if s.cut < 0 else s.low + widths[0]  # from the side in view
-        return anchor + (target - a) * s.axis
+        return anchor + (target - a) * s.axis, True
 
     def _vote_person(self, det: Detection) -> None:
         """Count whether the detection is a person box, unless it is cut by the view's side
@@ -245,12 +242,11 @@ class Track:
         # learned box's anchor (depths lifted from the box) sits apart from the same person's cluster
         # of points, and a track switching between them would read that offset as motion
         lifted = det.source == "learned"
-        cut = self._cut(det)
         if k.same_kind_differences:
             first = next((i for i in range(first, len(obs)) if obs[i].lifted == lifted), first)
         prev = obs[first]
         dt = stamp - prev.stamp
-        anchor = self._measured_anchor(det)
+        anchor, cut = self._measure(det)
         per_frame = self.clock.steps(self.clock.period)  # reference frames per frame
         if not cut:
             w_off = blend(0.3, per_frame)
