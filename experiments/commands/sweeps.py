@@ -78,9 +78,9 @@ def add_parser(sub) -> None:
                     "which seeds turned from success to failure and which the other way, and the exact two-sided "
                     "sign test (McNemar's) on those; seeds with the same outcome in both say nothing about the "
                     "change. Every outcome class (at-fault collision, timeout, ...) gets the same test and a 95 % "
-                    "interval of the change in its rate. Two success rates alone cannot tell a real gain from the churn of small changes; "
-                    "the paired test can. As a CI gate, --fail-if-worse exits with status 1 on a significant "
-                    "regression.",
+                    "interval of the change in its rate. Two success rates alone cannot tell a real gain from the "
+                    "churn of small changes; the paired test can. As a CI gate, --fail-if-worse exits with status 1 "
+                    "on a significant regression.",
         epilog=examples("dodt-nav compare runs/base runs/new",
                         "dodt-nav compare runs/base/results.jsonl runs/new/results.jsonl --fail-if-worse 0.05"),
         func=cmd_compare)
