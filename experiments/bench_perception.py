@@ -111,7 +111,8 @@ def write_tables(out: Path, overall: dict, per_scn: dict, per_seed: dict | None 
                      "paper_pos_err_m": paper[1], "paper_vel_err_mps": paper[2], "paper_fp_rate_pct": paper[3],
                      "matched": s["matched"], "dynamic_reports": s["dynamic_reports"],
                      "duplicate_pct": 100 * s["duplicates"] / max(s["dynamic_reports"], 1),
-                     "static_speed_p95_mps": s["static_speed_p95"], "still_speed_p95_mps": s["still_speed_p95"]})
+                     "static_speed_p95_mps": s["static_speed_p95"], "still_speed_p95_mps": s["still_speed_p95"],
+                     "std_scale": s.get("std_scale", float("nan"))})
     with open(out / "table.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -127,6 +128,9 @@ def write_tables(out: Path, overall: dict, per_scn: dict, per_seed: dict | None 
                      f"{_fmt(r['static_speed_p95_mps'], 2)} | "
                      f"{_fmt(r['paper_pos_err_m'], 2)} | "
                      f"{_fmt(r['paper_vel_err_mps'], 2)} | {_fmt(r['paper_fp_rate_pct'], 1)} |")
+    lines += ["", "The tracks' reported position std against their error (std_scale: 1 when calibrated, below 1 "
+              "when the std overstates the error): " + ", ".join(f"{r['configuration']} {_fmt(r['std_scale'], 2)}"
+                                                                   for r in rows) + "."]
     lines += ["", "Per scenario (pos. err. m / vel. err. m/s / FP % / recall % / id switches / static speed p95 m/s):", "",
               "| Method | " + " | ".join(per_scn) + " |", "|---|" + "---|" * len(per_scn)]
     for cfg in overall:

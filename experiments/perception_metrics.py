@@ -18,6 +18,10 @@ a pair counting only within ``match_distance`` (0.5 m).
 - recall by distance: the same, counted in bins of camera distance out to 10 m (the paper's
   Fig. 10: the learned module's range extension); people beyond 5 m count when they show at
   least ``min_visible_px`` pixels (without segmentation: centre in view within 10 m);
+- the filter's position std against its error (``std_scale``): the median, over matched pairs within
+  ``table_range``, of the error over the track's reported ``position_std``, divided by sqrt(2 ln 2) (the
+  median distance of an isotropic Gaussian error with one standard deviation per axis): 1 when the
+  reported std is calibrated, below 1 when it overstates the error;
 - id switches: a person matched by a different track id than the last time it was matched;
 - speed of static tracks: the reported horizontal speed of every track labelled static, in every
   frame (``static_speed_p95``), and of every track, whatever its label, lying farther than
@@ -35,6 +39,8 @@ from scipy.optimize import linear_sum_assignment
 from dodt.frames import CameraIntrinsics
 from dodt.geometry import in_field_of_view
 
+# the median distance from the mean of an isotropic 2D Gaussian, in standard deviations per axis
+MEDIAN_PER_SIGMA = float(np.sqrt(2.0 * np.log(2.0)))
 RECALL_BINS = (0.5, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)  # m, camera distance
 
 
@@ -49,6 +55,7 @@ class PerceptionMetrics:
     pos_err: list = field(default_factory=list)
     pos_err_3d: list = field(default_factory=list)
     vel_err: list = field(default_factory=list)
+    std_ratio: list = field(default_factory=list)  # error / reported position_std, matched pairs in range
     table_range: float = 5.0
     pos_err_beyond: list = field(default_factory=list)
     vel_err_beyond: list = field(default_factory=list)
@@ -105,6 +112,9 @@ class PerceptionMetrics:
                 self.pos_err.append(e)
                 self.pos_err_3d.append(float(np.linalg.norm(o.center - p.center)))
                 self.vel_err.append(v)
+                std = float(getattr(o, "position_std", 0.0))
+                if std > 0.0:
+                    self.std_ratio.append(e / std)
             fe.append(e)
             fv.append(v)
             matched_people[p.id] = o.id
@@ -149,7 +159,9 @@ class PerceptionMetrics:
                 "id_switches": self.id_switches, "matched": len(self.pos_err), "dynamic_reports": self.dynamic_reports,
                 "false_dynamic": self.false_dynamic, "duplicates": self.duplicates, "visible_people": self.visible_people, "frames": self.frames,
                 "static_speed_p95": p95(self.static_speeds), "still_speed_p95": p95(self.still_speeds),
-                "static_tracks": len(self.static_speeds)}
+                "static_tracks": len(self.static_speeds),
+                "std_scale": (float(np.median(self.std_ratio)) / MEDIAN_PER_SIGMA if self.std_ratio
+                              else float("nan"))}
 
     @staticmethod
     def combine(parts: list["PerceptionMetrics"]) -> dict:
@@ -158,6 +170,7 @@ class PerceptionMetrics:
             m.pos_err += p.pos_err
             m.pos_err_3d += p.pos_err_3d
             m.vel_err += p.vel_err
+            m.std_ratio += p.std_ratio
             m.pos_err_beyond += p.pos_err_beyond
             m.vel_err_beyond += p.vel_err_beyond
             m.static_speeds += p.static_speeds

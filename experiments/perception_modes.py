@@ -191,8 +191,11 @@ class DODTPerception:
             # the filter's velocity: a track the moving rule passes may be labelled static (zero velocity)
             v = o.velocity if o.filter_velocity is None else o.filter_velocity
             a = o.acceleration if o.filter_acceleration is None else o.filter_acceleration
-            preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=v,
-                                            acceleration=a, position_std=o.position_std))
+            # The filter's position std is not passed (the prediction's own default growth is): DODT's
+            # filter states about 2.5 times the error it makes (the perception benchmark's std_scale), and
+            # the planner, which adds the std to a person's radius, then backs away from walkers it could
+            # pass (docs/planner.md, "Where it stands").
+            preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=v, acceleration=a))
             # The map is freed under DODT's dynamic tracks; under a track dynamic only by the learned
             # detector's person label, only while it moves: a misplaced person box lifted onto a
             # wall would otherwise open a hole in the wall (ours; dodt without the module has no

@@ -1,6 +1,8 @@
 """The perception benchmark's table writer (experiments.bench_perception.write_tables)."""
 import csv
 
+import numpy as np
+
 from experiments.bench_perception import write_tables
 from experiments.perception_metrics import PerceptionMetrics
 
@@ -30,3 +32,19 @@ def test_one_seed_writes_no_per_seed_section(tmp_path):
     overall = {"dodt": _summary(0.05, 0.10, 1, 100, 96).summary()}
     text = write_tables(tmp_path, overall, {"circles": overall}, {0: overall})
     assert "Per seed" not in text
+
+
+def test_std_scale_is_one_for_a_calibrated_std_and_halves_when_the_std_is_doubled(tmp_path):
+    rng = np.random.default_rng(0)
+    sigma = 0.1
+    err = np.hypot(*rng.normal(0.0, sigma, (2, 20000)))  # isotropic, sigma per axis
+    calibrated, doubled = PerceptionMetrics(), PerceptionMetrics()
+    calibrated.std_ratio = list(err / sigma)
+    doubled.std_ratio = list(err / (2 * sigma))
+    assert abs(calibrated.summary()["std_scale"] - 1.0) < 0.03
+    assert abs(doubled.summary()["std_scale"] - 0.5) < 0.015
+    overall = {"dodt": doubled.summary()}
+    overall["dodt"].update(pos_err=0.05, vel_err=0.1, recall=0.9)
+    text = write_tables(tmp_path, overall, {"circles": overall})
+    assert "calibrated, below 1 when the std overstates the error): dodt 0.50." in text
+    assert abs(float(next(csv.DictReader(open(tmp_path / "table.csv")))["std_scale"]) - 0.5) < 0.015

@@ -49,3 +49,16 @@ def test_recall_by_distance_and_errors_within_table_range():
     assert both["visible_by_distance"]["7-8"] == 2 and both["recall_beyond_4m"] == pytest.approx(0.5)
     assert both["matched_beyond"] == 2
     assert RECALL_BINS[0] == 0.5 and RECALL_BINS[-1] == 10.0
+
+
+def test_std_scale_divides_each_error_by_its_tracks_reported_std_within_table_range():
+    m = PerceptionMetrics()
+    people = [_person(1, 1.5, 0.0), _person(2, 3.5, 1.0), _person(3, 7.5, -0.5)]
+    tracks = [_track(11, 1.6, 0.0, 1.0), _track(12, 3.5, 1.3, 1.0), _track(13, 7.8, -0.5, 1.0)]
+    for t, std in zip(tracks, (0.2, 0.1, 0.01)):  # the 7.5 m pair lies beyond table_range: not counted
+        t.position_std = std
+    m.add(*_frame(people, tracks), K)
+    assert m.std_ratio == pytest.approx([0.5, 3.0])
+    assert m.summary()["std_scale"] == pytest.approx(1.75 / np.sqrt(2 * np.log(2)))
+    assert PerceptionMetrics.combine([m, m])["std_scale"] == pytest.approx(m.summary()["std_scale"])
+    assert np.isnan(PerceptionMetrics().summary()["std_scale"])  # no pairs: no figure

@@ -242,3 +242,21 @@ def test_the_protocol_is_dodts_and_every_built_in_mode_implements_it():
     assert pm.PerceptionOutput is dodt.protocol.PerceptionOutput
     for mode in pm.MODES:
         assert isinstance(make_perception(mode), dodt.protocol.PerceptionModule), mode
+
+
+def test_the_planner_gets_the_tracks_but_not_the_filters_overstated_std(monkeypatch):
+    from dodt.result import PerceptionResult, TrackedObstacle
+    from experiments.perception_modes import DODTPerception
+    from planner.types import ObstaclePrediction
+
+    tracks = tuple(TrackedObstacle(id=i, center=np.array([3.0, i, 0.9]), size=np.array([0.5, 0.5, 1.8]),
+                                   velocity=np.array([1.0, 0.0, 0.0]), acceleration=np.zeros(3), dynamic=True,
+                                   coasting=i == 2, age=1.0, history=np.zeros((0, 4)), position_std=std)
+                   for i, std in ((1, 0.12), (2, 0.8)))
+    perc = DODTPerception("dodt")
+    monkeypatch.setattr(perc.dodt, "process", lambda frame: PerceptionResult(0.0, 0, tracks, {}))
+    out = perc.update(None)
+    assert [o.id for o in out.obstacles] == [1, 2]
+    assert [o.position_std for o in out.obstacles] == [0.0, 0.0]
+    default = ObstaclePrediction(0, np.zeros(3), np.ones(3))
+    assert [o.std_growth for o in out.obstacles] == [default.std_growth] * 2 and default.std_growth > 0
