@@ -192,7 +192,7 @@ class DODTPerception:
             v = o.velocity if o.filter_velocity is None else o.filter_velocity
             a = o.acceleration if o.filter_acceleration is None else o.filter_acceleration
             # The filter's position std is not passed (the prediction's own default growth is): DODT's
-            # filter states about 2.5 times the error it makes (the perception benchmark's std_scale), and
+            # filter states two to three times the error it makes (the perception benchmark's std_scale), and
             # the planner, which adds the std to a person's radius, then backs away from walkers it could
             # pass (docs/planner.md, "Where it stands").
             preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=v, acceleration=a))
