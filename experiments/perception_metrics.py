@@ -22,6 +22,12 @@ a pair counting only within ``match_distance`` (0.5 m).
   ``table_range``, of the error over the track's reported ``position_std``, divided by sqrt(2 ln 2) (the
   median distance of an isotropic Gaussian error with one standard deviation per axis): 1 when the
   reported std is calibrated, below 1 when it overstates the error;
+- prediction error (``pred_err_cv``, ``pred_err_ca``): for every matched pair within ``table_range``,
+  where the track's state puts the person ``horizon`` (1 s) later, against where the person then is
+  (mean horizontal distance): at constant velocity, and with the track's acceleration held (constant
+  acceleration, the filter's own model). What a planner reading the tracks is told of the next second.
+  The person's place is read at the first frame at or after that time (none within ``max_lag``: the pair
+  is not scored; nor when the person has left the ground truth);
 - id switches: a person matched by a different track id than the last time it was matched;
 - speed of static tracks: the reported horizontal speed of every track labelled static, in every
   frame (``static_speed_p95``), and of every track, whatever its label, lying farther than
@@ -73,10 +79,29 @@ class PerceptionMetrics:
     still_speeds: list = field(default_factory=list)
     last_id: dict = field(default_factory=dict)
     series: list = field(default_factory=list)  # (t, mean pos err of the frame, mean vel err) for plots
+    horizon: float = 1.0  # s, the prediction error's look-ahead
+    max_lag: float = 0.1  # s, the latest frame after that time the prediction is scored at
+    pred_cv: list = field(default_factory=list)  # m, constant-velocity prediction errors
+    pred_ca: list = field(default_factory=list)  # m, constant-acceleration prediction errors
+    pending: list = field(default_factory=list)  # (due stamp, person id, cv xy, ca xy), oldest first
+
+    def _score_predictions(self, stamp: float, people: dict) -> None:
+        """Scores the predictions due by ``stamp`` against ``people`` ({id: (2,) xy})."""
+        n = 0
+        for due, pid, cv, ca in self.pending:
+            if due > stamp + 1e-9:
+                break
+            n += 1
+            if stamp - due <= self.max_lag + 1e-9 and pid in people:
+                self.pred_cv.append(float(np.linalg.norm(cv - people[pid])))
+                self.pred_ca.append(float(np.linalg.norm(ca - people[pid])))
+        del self.pending[:n]
 
     def add(self, result, truth, K: CameraIntrinsics) -> None:
         self.frames += 1
         people = [o for o in truth.obstacles if o.kind == "person"]
+        if self.pending:
+            self._score_predictions(float(truth.stamp), {p.id: p.center[:2] for p in people})
         for o in getattr(result, "obstacles", ()):
             speed = float(np.hypot(o.velocity[0], o.velocity[1]))
             if not o.dynamic:
@@ -115,6 +140,10 @@ class PerceptionMetrics:
                 std = float(getattr(o, "position_std", 0.0))
                 if std > 0.0:
                     self.std_ratio.append(e / std)
+                h = self.horizon
+                cv = o.center[:2] + h * np.asarray(o.velocity[:2], dtype=float)
+                acc = np.asarray(getattr(o, "acceleration", np.zeros(3))[:2], dtype=float)
+                self.pending.append((float(truth.stamp) + h, p.id, cv, cv + 0.5 * h * h * acc))
             fe.append(e)
             fv.append(v)
             matched_people[p.id] = o.id
@@ -161,7 +190,8 @@ class PerceptionMetrics:
                 "static_speed_p95": p95(self.static_speeds), "still_speed_p95": p95(self.still_speeds),
                 "static_tracks": len(self.static_speeds),
                 "std_scale": (float(np.median(self.std_ratio)) / MEDIAN_PER_SIGMA if self.std_ratio
-                              else float("nan"))}
+                              else float("nan")),
+                "pred_err_cv": mean(self.pred_cv), "pred_err_ca": mean(self.pred_ca), "predicted": len(self.pred_cv)}
 
     @staticmethod
     def combine(parts: list["PerceptionMetrics"]) -> dict:
@@ -171,6 +201,8 @@ class PerceptionMetrics:
             m.pos_err_3d += p.pos_err_3d
             m.vel_err += p.vel_err
             m.std_ratio += p.std_ratio
+            m.pred_cv += p.pred_cv
+            m.pred_ca += p.pred_ca
             m.pos_err_beyond += p.pos_err_beyond
             m.vel_err_beyond += p.vel_err_beyond
             m.static_speeds += p.static_speeds

@@ -48,3 +48,14 @@ def test_std_scale_is_one_for_a_calibrated_std_and_halves_when_the_std_is_double
     text = write_tables(tmp_path, overall, {"circles": overall})
     assert "calibrated, below 1 when the std overstates the error): dodt 0.50." in text
     assert abs(float(next(csv.DictReader(open(tmp_path / "table.csv")))["std_scale"]) - 0.5) < 0.015
+
+
+def test_prediction_errors_are_a_line_of_the_table_and_columns_of_the_csv(tmp_path):
+    m = PerceptionMetrics()
+    m.pred_cv, m.pred_ca = [0.2, 0.4], [0.5, 0.7]
+    overall = {"dodt": m.summary()}
+    overall["dodt"].update(pos_err=0.05, vel_err=0.1, recall=0.9)
+    text = write_tables(tmp_path, overall, {"circles": overall})
+    assert "with the filter's acceleration held: dodt 0.30 / 0.60." in text
+    row = next(csv.DictReader(open(tmp_path / "table.csv")))
+    assert (float(row["pred_err_cv_m"]), float(row["pred_err_ca_m"])) == (0.3, 0.6)

@@ -62,3 +62,41 @@ def test_std_scale_divides_each_error_by_its_tracks_reported_std_within_table_ra
     assert m.summary()["std_scale"] == pytest.approx(1.75 / np.sqrt(2 * np.log(2)))
     assert PerceptionMetrics.combine([m, m])["std_scale"] == pytest.approx(m.summary()["std_scale"])
     assert np.isnan(PerceptionMetrics().summary()["std_scale"])  # no pairs: no figure
+
+
+def test_prediction_error_scores_where_a_track_puts_its_person_a_horizon_later():
+    m = PerceptionMetrics(horizon=1.0)
+    for k in range(25):  # a person walking at 1 m/s along x; a track 0.1 m behind, velocity exact
+        t = k * 0.1
+        track = _track(11, 1.4 + t, 0.0, 1.0)
+        track.acceleration = np.array([0.6, 0.0, 0.0])  # an acceleration the person does not have
+        if k == 13:  # a missing frame: what is due at 1.3 s is scored at 1.4 s (within max_lag)
+            continue
+        result, truth = _frame([_person(1, 1.5 + t, 0.0)], [track])
+        truth.stamp = t
+        m.add(result, truth, K)
+    s = m.summary()
+    # made at 0 .. 2.4 s but 1.3: due at 1.0 .. 2.4 s but 2.3 are scored, those due later wait
+    assert s["predicted"] == 14 and len(m.pending) == 10
+    late = 3  # the one due at 1.3 s, scored 0.1 s (0.1 m of walking) late
+    cv, ca = np.array(m.pred_cv), np.array(m.pred_ca)
+    assert np.delete(cv, late) == pytest.approx(0.1)  # the track's own 0.1 m lag, carried at the right speed
+    assert np.delete(ca, late) == pytest.approx(0.2)  # 0.5 * 0.6 m/s^2 * (1 s)^2 ahead, less the lag
+    assert (cv[late], ca[late]) == pytest.approx((0.2, 0.1))
+    assert s["pred_err_cv"] == pytest.approx(cv.mean()) and s["pred_err_ca"] == pytest.approx(ca.mean())
+    assert PerceptionMetrics.combine([m, m])["predicted"] == 28
+
+
+def test_prediction_error_skips_a_person_who_has_left_or_a_frame_too_late():
+    m = PerceptionMetrics(horizon=0.5, max_lag=0.1)
+    result, truth = _frame([_person(1, 1.5, 0.0), _person(2, 3.0, 0.0)], [_track(11, 1.5, 0.0, 1.0),
+                                                                             _track(12, 3.0, 0.0, 1.0)])
+    m.add(result, truth, K)
+    later, truth2 = _frame([_person(1, 2.0, 0.0)], [])  # person 2 gone; 0.7 s later: 0.2 s past due
+    truth2.stamp = 0.7
+    m.add(later, truth2, K)
+    assert m.summary()["predicted"] == 0 and m.pending == []
+    m.add(result, truth, K)
+    truth2.stamp = 0.55
+    m.add(later, truth2, K)
+    assert m.summary()["predicted"] == 1 and m.summary()["pred_err_cv"] == pytest.approx(0.0)
