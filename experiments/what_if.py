@@ -1,0 +1,177 @@
+"""What-if perception: DODT's reports completed or corrected by the simulator's truth.
+
+Diagnostics, not sensors: each class answers "how much would the closed loop gain if DODT did not
+have this one shortcoming?" by removing it with the truth and leaving everything else as DODT reports
+it. They are perception plug-ins (experiments.plugins), e.g.
+
+    dodt-nav sweep corridor --seeds 400:600 --perception experiments.what_if:ViewCompleted --out runs/view
+    dodt-nav compare runs/dodt runs/view
+
+Completed (DODT's reports, plus each person they leave out, exact):
+- ``RecentlyLeft``: people who left the camera's view less than ``memory`` (1 s) ago;
+- ``SideCompleted``: people out of view within ``half_view`` (90 deg) of the camera's heading: a 180 deg view;
+- ``ViewCompleted``: people in the camera's view as the ``oracle`` mode sees them (the horizontal view's cone
+  within 5 m, so people hidden behind structure or another person too);
+- ``VisibleCompleted``: people the depth frame shows (at least ``min_points`` of 15 points on the near side
+  of the body project into the image at their own depth): what a tracker could report at once.
+
+Corrected (DODT's reports only, changed):
+- ``TrueStates``: each report of a person at that person's true centre, size and velocity;
+- ``NoPhantoms``: the reports of no person dropped.
+
+A person is reported when one of DODT's reports lies within ``match`` (0.6 m) of them horizontally. A
+person added has the truth's centre, size and velocity, no acceleration, and the id ``ADDED_ID`` + theirs.
+Subclass one to change its parameters (a plug-in is built with no arguments).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from dodt.protocol import PerceptionOutput
+from experiments.perception_modes import DODTPerception, bearing_and_distance, horizontal_view
+from planner.types import ObstaclePrediction
+
+ADDED_ID = 100000
+
+
+def _exact(person, oid: int) -> ObstaclePrediction:
+    return ObstaclePrediction(id=oid, center=person.center.copy(), size=person.size.copy(),
+                              velocity=person.velocity.copy(), acceleration=np.zeros(3))
+
+
+def _gap(report, person) -> float:
+    return float(np.hypot(*(np.asarray(report.center[:2]) - person.center[:2])))
+
+
+class _DODTWithTruth:
+    uses_ground_truth = True
+    uses_images = True
+    uses_color = False
+    match = 0.6  # m: a report this near a person (horizontally) reports them
+    max_range = 5.0  # m: the oracle's range (to the body's near side)
+
+    def __init__(self):
+        self.dodt = DODTPerception("dodt")
+        self.reset()
+
+    @property
+    def name(self) -> str:
+        return f"dodt+{type(self).__name__}"
+
+    @property
+    def structure_test(self):  # the closed loop sets the map's test on DODT's moving-track rule
+        return self.dodt.structure_test
+
+    @structure_test.setter
+    def structure_test(self, test) -> None:
+        self.dodt.structure_test = test
+
+    def reset(self) -> None:
+        self.dodt.reset()
+        self._last_in_view: dict[int, float] = {}
+
+    def update(self, frame, truth=None) -> PerceptionOutput:
+        if truth is None:
+            raise ValueError(f"{type(self).__name__} needs the simulator's ground truth")
+        out = self.dodt.update(frame)
+        people = [o for o in truth.obstacles if o.kind == "person"]
+        reports = self._corrected(out.obstacles, people)
+        cam, heading, half_fov = horizontal_view(truth.T_world_camera, frame.intrinsics)
+        added = []
+        for o in people:
+            bearing, dist = bearing_and_distance(cam, heading, o.center)
+            radius = 0.5 * float(np.hypot(*o.size[:2]))
+            in_view = bearing <= half_fov + math.atan2(radius, max(dist, 1e-6)) and dist - radius <= self.max_range
+            if in_view:
+                self._last_in_view[o.id] = truth.stamp
+            if not self._adds(o, in_view, bearing, dist - radius, truth, frame):
+                continue
+            if any(_gap(q, o) < self.match for q in out.obstacles):
+                continue
+            added.append(_exact(o, ADDED_ID + o.id))
+        return replace(out, obstacles=tuple(reports) + tuple(added))
+
+    def _corrected(self, reports, people) -> list:
+        """DODT's reports as passed on (all of them, unchanged, unless a subclass says otherwise)."""
+        return list(reports)
+
+    def _adds(self, person, in_view: bool, bearing: float, near_side: float, truth, frame) -> bool:
+        """Whether ``person`` is added when DODT does not report them (none, unless a subclass says)."""
+        return False
+
+
+class RecentlyLeft(_DODTWithTruth):
+    memory = 1.0  # s since the person was last in view
+
+    def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
+        seen = self._last_in_view.get(person.id)
+        return not in_view and seen is not None and truth.stamp - seen <= self.memory
+
+
+class SideCompleted(_DODTWithTruth):
+    half_view = 90.0  # deg about the camera's heading
+
+    def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
+        return not in_view and bearing <= math.radians(self.half_view) and near_side <= self.max_range
+
+
+class ViewCompleted(_DODTWithTruth):
+    def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
+        return in_view
+
+
+class VisibleCompleted(_DODTWithTruth):
+    min_points = 3  # of the 15 body points the depth frame must show
+    depth_tolerance = 0.35  # m between a point's depth and the frame's there
+    body = 0.25  # m: the near side's points lie this far in front of the centre, and this far to each side
+    range_limit = 5.5  # m from the camera to the person's centre
+
+    def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
+        T = np.asarray(truth.T_world_camera, dtype=float)
+        cam = T[:3, 3]
+        d = person.center[:2] - cam[:2]
+        dist = float(np.hypot(*d))
+        return 1e-3 < dist <= self.range_limit and self._shown(person, d / dist, frame.depth_m(),
+                                                               frame.intrinsics, T)
+
+    def _shown(self, person, toward, depth, K, T) -> bool:
+        """Whether the depth frame shows at least min_points of 15 points on the body's near side (3
+        columns across it, 5 heights from 20 to 90 % of its height)."""
+        side = np.array([-toward[1], toward[0]])
+        near = person.center[:2] - toward * self.body
+        bottom, top = float(person.center[2] - person.size[2] / 2), float(person.center[2] + person.size[2] / 2)
+        heights = np.linspace(bottom + 0.2 * (top - bottom), bottom + 0.9 * (top - bottom), 5)
+        H, W = depth.shape
+        shown = 0
+        for s in (-1.0, 0.0, 1.0):
+            xy = near + side * s * self.body
+            for z in heights:
+                q = T[:3, :3].T @ (np.array([xy[0], xy[1], z]) - T[:3, 3])  # optical: x right, y down, z ahead
+                if q[2] <= 0.1:
+                    continue
+                u, v = K.fx * q[0] / q[2] + K.cx, K.fy * q[1] / q[2] + K.cy
+                if not (0 <= u < W and 0 <= v < H):
+                    continue
+                i, j = int(v), int(u)
+                window = depth[max(i - 2, 0):i + 3, max(j - 2, 0):j + 3]
+                window = window[np.isfinite(window) & (window > 0)]
+                if window.size and abs(float(np.median(window)) - q[2]) < self.depth_tolerance:
+                    shown += 1
+        return shown >= self.min_points
+
+
+class TrueStates(_DODTWithTruth):
+    def _corrected(self, reports, people) -> list:
+        out = []
+        for q in reports:
+            near = [(_gap(q, o), o) for o in people if _gap(q, o) < self.match]
+            out.append(_exact(min(near, key=lambda x: x[0])[1], q.id) if near else q)
+        return out
+
+
+class NoPhantoms(_DODTWithTruth):
+    def _corrected(self, reports, people) -> list:
+        return [q for q in reports if any(_gap(q, o) < self.match for o in people)]

@@ -1,0 +1,119 @@
+"""experiments.what_if: DODT's reports completed or corrected by the truth, on hand-made truth with DODT's
+reports stubbed."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from dodt.frames import CameraIntrinsics
+from dodt.protocol import PerceptionOutput
+from experiments import what_if
+from experiments.perception_modes import make_perception
+from planner.types import ObstaclePrediction
+from sim.ground_truth import ObstacleTruth
+
+AHEAD, BEHIND, SIDE = (3.0, 0.0), (-2.0, 0.0), (0.0, 2.0)
+K = CameraIntrinsics()
+
+
+def _truth(stamp, people_xy):
+    """A camera at (0, 0, 1.2) looking along +x (optical z forward) and people walking at people_xy."""
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # optical -> world
+    T[:3, 3] = [0.0, 0.0, 1.2]
+    people = tuple(ObstacleTruth(id=i + 1, kind="person", label="person", aabb_min=np.array([x - 0.25, y - 0.25, 0.0]),
+                                 aabb_max=np.array([x + 0.25, y + 0.25, 1.7]), velocity=np.array([0.5, 0.1, 0.0]))
+                   for i, (x, y) in enumerate(people_xy))
+    return SimpleNamespace(T_world_camera=T, obstacles=people, stamp=stamp)
+
+
+def _frame(stamp=0.0, depth=2.75):
+    image = np.full((K.height, K.width), depth, np.float32)
+    return SimpleNamespace(intrinsics=K, stamp=stamp, depth_m=lambda: image)
+
+
+class _Reports:
+    """Stands in for DODT: reports the given obstacles at every frame."""
+
+    def __init__(self, *reports):
+        self.reports, self.structure_test = reports, None
+
+    def reset(self):
+        pass
+
+    def update(self, frame, truth=None):
+        return PerceptionOutput(stamp=frame.stamp, obstacles=self.reports)
+
+
+def _report(oid, xy):
+    return ObstaclePrediction(id=oid, center=np.array([*xy, 0.85]), size=np.array([0.4, 0.4, 1.6]),
+                              velocity=np.array([1.0, 0.0, 0.0]))
+
+
+def _with(cls, *reports):
+    p = cls()
+    p.dodt = _Reports(*reports)
+    return p
+
+
+def _ids(p, stamp, people_xy, **frame):
+    return [o.id for o in p.update(_frame(stamp, **frame), _truth(stamp, people_xy)).obstacles]
+
+
+def test_recently_left_adds_a_person_for_a_second_after_they_leave_the_view():
+    p = _with(what_if.RecentlyLeft)
+    added = what_if.ADDED_ID + 1
+    assert _ids(p, 0.0, [AHEAD]) == []  # in view: DODT's to report
+    assert _ids(p, 0.5, [BEHIND]) == [added] and _ids(p, 1.0, [BEHIND]) == [added]
+    assert _ids(p, 1.1, [BEHIND]) == []  # more than a second since
+    assert _ids(p, 1.2, [AHEAD]) == [] and _ids(p, 1.7, [SIDE]) == [added]  # seen again, left again
+    p.reset()
+    assert _ids(p, 0.0, [BEHIND]) == []  # never in view since the reset
+
+
+def test_an_added_person_is_exact_and_a_reported_one_is_not_added_again():
+    p = _with(what_if.ViewCompleted)
+    (o,) = p.update(_frame(), _truth(0.0, [AHEAD])).obstacles
+    np.testing.assert_array_equal(o.center, [3.0, 0.0, 0.85])
+    np.testing.assert_array_equal(o.size, [0.5, 0.5, 1.7])
+    np.testing.assert_array_equal(o.velocity, [0.5, 0.1, 0.0])
+    np.testing.assert_array_equal(o.acceleration, np.zeros(3))
+    assert _ids(_with(what_if.ViewCompleted, _report(7, (3.5, 0.0))), 0.0, [AHEAD]) == [7]  # within 0.6 m
+    assert _ids(_with(what_if.ViewCompleted, _report(7, (3.7, 0.0))), 0.0, [AHEAD]) == [7, what_if.ADDED_ID + 1]
+
+
+@pytest.mark.parametrize("cls, added", [(what_if.SideCompleted, {2}), (what_if.ViewCompleted, {1}),
+                                        (what_if.RecentlyLeft, set()), (what_if.TrueStates, set())])
+def test_each_completion_adds_the_people_it_names(cls, added):
+    # AHEAD in view, SIDE at 90 deg, BEHIND at 180 deg
+    assert set(_ids(_with(cls), 0.0, [AHEAD, SIDE, BEHIND])) == {what_if.ADDED_ID + i for i in added}
+
+
+def test_visible_completed_adds_only_a_person_the_depth_frame_shows():
+    p = _with(what_if.VisibleCompleted)
+    assert _ids(p, 0.0, [AHEAD], depth=2.75) == [what_if.ADDED_ID + 1]  # the body's near side at 2.75 m
+    assert _ids(p, 0.0, [AHEAD], depth=1.0) == []  # something at 1 m hides them
+    assert _ids(p, 0.0, [AHEAD], depth=0.0) == []  # no depth there
+    assert _ids(p, 0.0, [BEHIND, SIDE], depth=2.75) == []  # outside the image
+
+
+def test_true_states_corrects_reports_of_people_and_no_phantoms_drops_the_others():
+    near, phantom = _report(7, (3.3, 0.2)), _report(8, (6.0, 1.0))
+    truth = _truth(0.0, [AHEAD])
+    fixed = _with(what_if.TrueStates, near, phantom).update(_frame(), truth).obstacles
+    assert [o.id for o in fixed] == [7, 8]
+    np.testing.assert_array_equal(fixed[0].center, truth.obstacles[0].center)
+    np.testing.assert_array_equal(fixed[0].velocity, [0.5, 0.1, 0.0])
+    assert fixed[1] is phantom
+    kept = _with(what_if.NoPhantoms, near, phantom).update(_frame(), truth).obstacles
+    assert kept == (near,)
+
+
+def test_what_if_modes_need_the_truth_and_plug_in_by_name():
+    p = make_perception("experiments.what_if:ViewCompleted")
+    assert isinstance(p, what_if.ViewCompleted) and p.uses_ground_truth and p.name == "dodt+ViewCompleted"
+    test = object()
+    p.structure_test = test  # the closed loop's map test reaches DODT's moving-track rule
+    assert p.dodt.structure_test is test
+    with pytest.raises(ValueError, match="ViewCompleted needs the simulator's ground truth"):
+        p.update(_frame(), None)
