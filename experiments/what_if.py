@@ -19,6 +19,10 @@ Corrected (DODT's reports only, changed):
 - ``TrueStates``: each report of a person at that person's true centre, size and velocity;
 - ``NoPhantoms``: the reports of no person dropped.
 
+``Combined``: ``ViewCompleted``, ``RecentlyLeft`` and ``TrueStates`` at once: what the ``oracle`` mode
+knows, with DODT's phantoms, and the map cleared under DODT's dynamic tracks only (the oracle clears it
+under every person it reports).
+
 A person is reported when one of DODT's reports lies within ``match`` (0.6 m) of them horizontally. A
 person added has the truth's centre, size and velocity, no acceleration, and the id ``ADDED_ID`` + theirs.
 Subclass one to change its parameters (a plug-in is built with no arguments).
@@ -175,3 +179,11 @@ class TrueStates(_DODTWithTruth):
 class NoPhantoms(_DODTWithTruth):
     def _corrected(self, reports, people) -> list:
         return [q for q in reports if any(_gap(q, o) < self.match for o in people)]
+
+
+class Combined(RecentlyLeft):
+    def _corrected(self, reports, people) -> list:
+        return TrueStates._corrected(self, reports, people)
+
+    def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
+        return in_view or super()._adds(person, in_view, bearing, near_side, truth, frame)

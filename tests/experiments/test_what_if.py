@@ -109,6 +109,16 @@ def test_true_states_corrects_reports_of_people_and_no_phantoms_drops_the_others
     assert kept == (near,)
 
 
+def test_combined_completes_the_view_and_the_recently_left_and_corrects_the_reports():
+    p = _with(what_if.Combined, _report(7, (3.3, 0.2)))
+    out = p.update(_frame(0.0), _truth(0.0, [AHEAD, SIDE])).obstacles
+    assert [o.id for o in out] == [7]  # AHEAD reported by DODT (corrected), SIDE never in view
+    np.testing.assert_array_equal(out[0].center, [3.0, 0.0, 0.85])
+    p.dodt = _Reports()
+    assert _ids(p, 0.1, [AHEAD, SIDE]) == [what_if.ADDED_ID + 1]  # in view, no longer reported
+    assert _ids(p, 0.6, [SIDE, SIDE]) == [what_if.ADDED_ID + 1]  # left the view 0.5 s ago
+
+
 def test_what_if_modes_need_the_truth_and_plug_in_by_name():
     p = make_perception("experiments.what_if:ViewCompleted")
     assert isinstance(p, what_if.ViewCompleted) and p.uses_ground_truth and p.name == "dodt+ViewCompleted"
