@@ -63,6 +63,17 @@ def bearing_and_distance(cam: np.ndarray, heading: float, xy) -> tuple[float, fl
     return abs(wrap_angle(math.atan2(d[1], d[0]) - heading)), float(np.hypot(*d))
 
 
+def oracle_view(cam: np.ndarray, heading: float, half_fov: float, obstacle, max_range: float,
+                all_around: bool = False) -> tuple[bool, float, float]:
+    """Whether the oracle sees ``obstacle`` (a sim.ground_truth.ObstacleTruth): any part of its body within
+    the horizontal cone of half angle ``half_fov`` about the heading (any direction if ``all_around``) and
+    its near side within ``max_range``; with the bearing of its centre and the distance to its near side."""
+    bearing, dist = bearing_and_distance(cam, heading, obstacle.center)
+    radius = 0.5 * float(np.hypot(*obstacle.size[:2]))
+    in_cone = all_around or bearing <= half_fov + math.atan2(radius, max(dist, 1e-6))
+    return dist - radius <= max_range and in_cone, bearing, dist - radius
+
+
 PERSON_CLEAR_SPEED = 0.4  # m/s: a person-labelled track frees the map only when moving this fast
 
 
@@ -298,12 +309,9 @@ class OraclePerception:
                 continue
             acc = self._acceleration(o.id, truth.stamp, o.velocity)
             vel = o.velocity + self._velocity_error(o.id, truth.stamp)
-            # Seen when any part of the body is within the horizontal FOV cone and range.
-            bearing, dist = bearing_and_distance(cam, heading, o.center)
-            radius = 0.5 * float(np.hypot(*o.size[:2]))
-            in_view = self.all_around or bearing <= half_fov + math.atan2(radius, max(dist, 1e-6))
+            in_view = oracle_view(cam, heading, half_fov, o, self.cfg.max_range, self.all_around)[0]
             seen = self._last_seen.get(o.id)
-            if dist - radius <= self.cfg.max_range and in_view:
+            if in_view:
                 if seen is None or truth.stamp - seen > self.cfg.memory:
                     self._first_seen[o.id] = truth.stamp
                 self._last_seen[o.id] = seen = truth.stamp

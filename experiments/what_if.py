@@ -35,7 +35,7 @@ from dataclasses import replace
 import numpy as np
 
 from dodt.protocol import PerceptionOutput
-from experiments.perception_modes import DODTPerception, bearing_and_distance, horizontal_view
+from experiments.perception_modes import DODTPerception, horizontal_view, oracle_view
 from planner.types import ObstaclePrediction
 
 ADDED_ID = 100000
@@ -48,6 +48,15 @@ def _exact(person, oid: int) -> ObstaclePrediction:
 
 def _gap(report, person) -> float:
     return float(np.hypot(*(np.asarray(report.center[:2]) - person.center[:2])))
+
+
+def _true_states(reports, people, match: float) -> list:
+    """Each report within ``match`` of a person as that person, exact (the nearest; the report's id kept)."""
+    out = []
+    for q in reports:
+        near = [(g, o) for o in people if (g := _gap(q, o)) < match]
+        out.append(_exact(min(near, key=lambda x: x[0])[1], q.id) if near else q)
+    return out
 
 
 class _DODTWithTruth:
@@ -86,16 +95,13 @@ class _DODTWithTruth:
         cam, heading, half_fov = horizontal_view(truth.T_world_camera, frame.intrinsics)
         added = []
         for o in people:
-            bearing, dist = bearing_and_distance(cam, heading, o.center)
-            radius = 0.5 * float(np.hypot(*o.size[:2]))
-            in_view = bearing <= half_fov + math.atan2(radius, max(dist, 1e-6)) and dist - radius <= self.max_range
+            in_view, bearing, near_side = oracle_view(cam, heading, half_fov, o, self.max_range)
             if in_view:
                 self._last_in_view[o.id] = truth.stamp
-            if not self._adds(o, in_view, bearing, dist - radius, truth, frame):
-                continue
             if any(_gap(q, o) < self.match for q in out.obstacles):
-                continue
-            added.append(_exact(o, ADDED_ID + o.id))
+                continue  # DODT reports them
+            if self._adds(o, in_view, bearing, near_side, truth, frame):
+                added.append(_exact(o, ADDED_ID + o.id))
         return replace(out, obstacles=tuple(reports) + tuple(added))
 
     def _corrected(self, reports, people) -> list:
@@ -133,13 +139,20 @@ class VisibleCompleted(_DODTWithTruth):
     body = 0.25  # m: the near side's points lie this far in front of the centre, and this far to each side
     range_limit = 5.5  # m from the camera to the person's centre
 
+    def reset(self) -> None:
+        super().reset()
+        self._depth = (None, None)  # (frame, its depth in metres): converted once per frame, when needed
+
     def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
         T = np.asarray(truth.T_world_camera, dtype=float)
         cam = T[:3, 3]
         d = person.center[:2] - cam[:2]
         dist = float(np.hypot(*d))
-        return 1e-3 < dist <= self.range_limit and self._shown(person, d / dist, frame.depth_m(),
-                                                               frame.intrinsics, T)
+        if not 1e-3 < dist <= self.range_limit:
+            return False
+        if self._depth[0] is not frame:
+            self._depth = (frame, frame.depth_m())
+        return self._shown(person, d / dist, self._depth[1], frame.intrinsics, T)
 
     def _shown(self, person, toward, depth, K, T) -> bool:
         """Whether the depth frame shows at least min_points of 15 points on the body's near side (3
@@ -169,11 +182,7 @@ class VisibleCompleted(_DODTWithTruth):
 
 class TrueStates(_DODTWithTruth):
     def _corrected(self, reports, people) -> list:
-        out = []
-        for q in reports:
-            near = [(_gap(q, o), o) for o in people if _gap(q, o) < self.match]
-            out.append(_exact(min(near, key=lambda x: x[0])[1], q.id) if near else q)
-        return out
+        return _true_states(reports, people, self.match)
 
 
 class NoPhantoms(_DODTWithTruth):
@@ -183,7 +192,7 @@ class NoPhantoms(_DODTWithTruth):
 
 class Combined(RecentlyLeft):
     def _corrected(self, reports, people) -> list:
-        return TrueStates._corrected(self, reports, people)
+        return _true_states(reports, people, self.match)
 
     def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
         return in_view or super()._adds(person, in_view, bearing, near_side, truth, frame)
