@@ -161,22 +161,19 @@ class VisibleCompleted(_DODTWithTruth):
         near = person.center[:2] - toward * self.body
         bottom, top = float(person.center[2] - person.size[2] / 2), float(person.center[2] + person.size[2] / 2)
         heights = np.linspace(bottom + 0.2 * (top - bottom), bottom + 0.9 * (top - bottom), 5)
+        points = np.array([[*(near + side * s * self.body), z] for s in (-1.0, 0.0, 1.0) for z in heights])
+        q = (points - T[:3, 3]) @ T[:3, :3]  # optical: x right, y down, z ahead
+        q = q[q[:, 2] > 0.1]
         H, W = depth.shape
         shown = 0
-        for s in (-1.0, 0.0, 1.0):
-            xy = near + side * s * self.body
-            for z in heights:
-                q = T[:3, :3].T @ (np.array([xy[0], xy[1], z]) - T[:3, 3])  # optical: x right, y down, z ahead
-                if q[2] <= 0.1:
-                    continue
-                u, v = K.fx * q[0] / q[2] + K.cx, K.fy * q[1] / q[2] + K.cy
-                if not (0 <= u < W and 0 <= v < H):
-                    continue
-                i, j = int(v), int(u)
-                window = depth[max(i - 2, 0):i + 3, max(j - 2, 0):j + 3]
-                window = window[np.isfinite(window) & (window > 0)]
-                if window.size and abs(float(np.median(window)) - q[2]) < self.depth_tolerance:
-                    shown += 1
+        for (u, v), z in zip(K.project(q), q[:, 2]):
+            if not (0 <= u < W and 0 <= v < H):
+                continue
+            i, j = int(v), int(u)
+            window = depth[max(i - 2, 0):i + 3, max(j - 2, 0):j + 3]
+            window = window[np.isfinite(window) & (window > 0)]
+            if window.size and abs(float(np.median(window)) - z) < self.depth_tolerance:
+                shown += 1
         return shown >= self.min_points
 
 
