@@ -22,9 +22,8 @@ from dataclasses import dataclass, field
 @dataclass(frozen=True)
 class DepthConfig:
     depth_min: float = 0.5  # m, ref depth_min_value
-    # m; ref depth_max_value 5.0. Ours 5.5: with 5.0 a person 4.5-5 m away loses its far side and
-    # its votes (points near the range's end are not voted on), and recall of people within 5 m
-    # (the metric's range) was 94.5 %; with 5.5, 96.1 % (recorded perception scenarios, seeds 0-2).
+    # m; ref depth_max_value 5.0. Ours 5.5: with 5.0 a person 4.5-5 m away (inside the recall
+    # metric's 5 m) loses its far side and its votes (points near the range's end are not voted on).
     # It needs the U-depth height filter (UDepthConfig.height_filter): without it the floor made
     # one corridor-wide box at 5.5 m
     depth_max: float = 5.5
@@ -61,8 +60,8 @@ class UDepthConfig:
     row_downsample: int = 4  # U-map bins = image rows / row_downsample
     min_dist: float = 0.01  # m
     # ref: threshold_point 3, line length 6, blur 5x9 sigma 10. Ours: 1, 3, 3x5 sigma 1.5: the
-    # simulated humanoid is thin, and the reference values found 57 % of the visible people within
-    # 5 m on our scenarios where these find 88 % (the ensemble with DBSCAN removes the extra boxes)
+    # simulated humanoid is thin, and the reference values miss many of the visible people within
+    # 5 m that these find (the ensemble with DBSCAN removes the extra boxes)
     threshold_point: int = 1  # a U-map cell counts if >= threshold_point * row_downsample
     min_line_length: int = 3  # U-map cells
     min_area: int = 25  # U-map cells (width x bins)
@@ -76,7 +75,6 @@ class UDepthConfig:
     # filter's) stay out of the U-depth map. With our low cell threshold the floor's nearest band
     # (several image rows per depth bin) made map lines across the whole view that joined the
     # corridor's walls into one box; with a 5.5 m depth range that box swallowed the people
-    # (recall 95 -> 64 %). At 5.0 m: position error 0.079 -> 0.071 m, id switches 35 -> 21
     height_filter: bool = True
 
 
@@ -89,8 +87,8 @@ class DBSCANConfig:
     # ours: a cluster wider than split_width (m, horizontally) is cut where its points, counted in
     # split_bin-wide slices along its long horizontal axis, fall to a valley of at most
     # split_valley_ratio of the peaks on both sides: two people walking side by side, linked by
-    # an arm within eps, are two obstacles (0 turns it off). 0.9 / 0.3 at first; 0.8 / 0.45 split
-    # more side-by-side pairs at 4-5 m (recorded scenarios, seeds 0-1: id switches 31 -> 21)
+    # an arm within eps, are two obstacles (0 turns it off). 0.8 / 0.45 split such pairs at 4-5 m
+    # too, where fewer points show the valley
     split_width: float = 0.8
     split_bin: float = 0.1  # m
     split_valley_ratio: float = 0.45
@@ -128,8 +126,7 @@ class KalmanConfig:
     model: str = "ca"  # ca: constant acceleration (paper), cv: constant velocity (baselines)
     # ours 4.0 (ref e_p 0.25): a new track's velocity prior of 0.5 m/s around zero held a walking
     # person's filtered speed under T_vel for several frames; p0 = 4 and r_vel = 0.1 let the
-    # pseudo-measurements take over sooner (recorded perception scenarios, seeds 0-1: recall
-    # +1.2 points, velocity error unchanged)
+    # pseudo-measurements take over sooner
     p0: float = 4.0
     q_pos: float = 0.01  # ref e_q_pos
     q_vel: float = 0.05  # ref e_q_vel
@@ -143,16 +140,13 @@ class KalmanConfig:
     measurement: str = "paper"
     # the point measured: "box" centre (paper), or the "mean" or "median" of the obstacle's points
     # (ours: limbs swing the box more than the body). The points are voxel centroids near a 0.1 m
-    # lattice, so their median moves in steps and the mean does not: on the recorded perception
-    # scenarios the velocity error was 0.32 (box), 0.175 (median) and 0.157 m/s (mean)
+    # lattice, so their median moves in steps and the mean does not
     position_source: str = "mean"
     # ours: the pseudo-measured velocity (a difference over up to averaging_time) is the
     # velocity of the middle of its span, which on a turn points turn rate x span / 2 behind.
     # It is rotated forward by the sustained turn rate, measured over turn_window seconds
-    # (dodt.tracker.Track._turn_compensated); 0 turns it off (the paper). Recorded perception
-    # scenarios, seeds 0-2: velocity error 0.153 -> 0.138 m/s (circles 0.194 -> 0.155; the
-    # straight walkers unchanged); without the sustained-turn test, 0.141 with the corridor's
-    # random walkers worse (0.231 -> 0.268)
+    # (dodt.tracker.Track._turn_compensated: the two halves of the window must turn the same way, so
+    # that a corner already turned or the body's sway gives none); 0 turns it off (the paper)
     # ours: velocity pseudo-measurements difference a learned box's anchor against the oldest learned
     # one in the window, and a cluster's against a cluster's, where the window holds one
     same_kind_differences: bool = True
@@ -170,23 +164,17 @@ class KalmanConfig:
 class TrackConfig:
     coast_time: float = 1.0  # s a track survives without detections on its prediction (beyond the paper)
     # a coasting track is dropped when, this long after its last detection, this fraction of its image
-    # region is seen this far behind where it should be (it is not there). Measured on circles,
-    # corridor and wall_pass: 0.9 / 0.5 m gave FP 4.9 %, recall 92.4 %; 0.75 / 0.3 m 1.8 %, 91.0 %.
-    # After 3 frames, 17 of the 60 tracks dropped on the recorded scenarios (seeds 0-1) were dynamic
-    # and within 0.6 m of a visible person who had only stepped off the prediction; after 7 (with
-    # the DBSCAN cut at 0.8 m / 0.45), seeds 0-2: recall 93.3 -> 94.4 %, vel 0.171 -> 0.165 m/s,
-    # pos 0.077 -> 0.079 m, FP 1.5 -> 1.6 % (seed 2 held out from the tuning: recall 91.8 -> 93.2 %)
+    # region is seen this far behind where it should be (it is not there; ours). Checked sooner,
+    # the test drops people who only stepped off the prediction
     seen_through_after: float = 7 / 30  # s: 7 missed frames at 30 Hz
     seen_through_fraction: float = 0.75
     seen_through_margin: float = 0.3  # m
     # a person track (dynamic at once by the learned detector's label) that misses its detection
     # while its filtered speed is above this is dropped, not coasted (ours): people walk at up to
     # 1.6 m/s here, and such a speed comes from the first noisy boxes of a young track (a learned
-    # box lifted 0.1 m apart in two frames is 3 m/s). With YOLO-MAD, seed 0 of far_people and
-    # circles: of the dynamic reports of coasting tracks faster than 2.5 m/s, 210 lay more than
-    # 0.5 m from every person, 7 within it. Other tracks are left alone: in the closed loop 14 % of
-    # the coasting starts of dodt's tracks are that fast, nearly all static-labelled pieces of wall
-    # seen from the moving drone, and dropping them there is not measured
+    # box lifted 0.1 m apart in two frames is 3 m/s), and the reports of such coasting tracks lie
+    # off every person. Other tracks are left alone: the coasting tracks that fast in the closed
+    # loop are nearly all static-labelled pieces of wall seen from the moving drone
     max_coast_speed: float = 2.5  # m/s
     output_history: float = 3.0  # s of centre history kept and output (the paper's figures show 3 s)
     # output size: exponential smoothing weight of the new detection, per frame at reference_rate (ours)
@@ -209,9 +197,8 @@ class IdentificationConfig:
     # shelves (a median of 635 points per vote on the drone's corridor frames)
     max_vote_points: int = 200
     # ours: an obstacle whose box is wider than this (horizontal diagonal, m) is no walking person
-    # or pair of people: it is not voted on and is no candidate (0: all are voted on). On the
-    # drone's corridor frames 358 of 781 votes were for such boxes (walls, shelves seen from a
-    # moving camera), and none of them made a candidate
+    # or pair of people: it is not voted on and is no candidate (0: all are voted on). Such boxes are
+    # walls and shelves seen from a moving camera, whose votes cost time and never make a candidate
     max_vote_extent: float = 2.5
     range_margin: float = 0.2  # m; points this close to depth_max back then are not voted on (ours)
     # px; points that were this close to the image border back then are not voted on: the cloud
@@ -219,13 +206,9 @@ class IdentificationConfig:
     fov_margin_px: float = 15.0
     # candidate in every frame within this span to become dynamic: ref default 3 consecutive frames
     # (ours too; 2 / 30 s; at 10 Hz and below, where a frame interval is longer, the frame itself:
-    # dodt.windows.FrameClock.frames_within). The authors' navigation configuration uses 5 (autonomous_flight cfg/dynamic_navigation); we used 5 while a
-    # side wall seen at a grazing angle from the flying drone blinked dynamic with 3. Measured now
-    # (recorded perception scenarios, seeds 0-1): 3 reports a person coming into view 2 frames
-    # sooner, recall +1.2 points, FP 0.78 -> 0.90 %, and every false dynamic report in the drone
-    # scenario (corridor) is a person track drifting off its person, no wall. Corridor sweep, seeds
-    # 0-19: 45 % success with 3, 50 % with the previous settings (within noise: re-flying the 6
-    # seeds that failed with 3 using 5 gave 1 success).
+    # dodt.windows.FrameClock.frames_within). The authors' navigation configuration uses 5
+    # (autonomous_flight cfg/dynamic_navigation); 3 reports a person coming into view 2 frames sooner,
+    # and release_span below keeps a young dynamic track from blinking static
     consistency_span: float = 2 / 30  # s
     # ours: a dynamic track turns static only when no frame over this span was a candidate (3 frames
     # in a row at 30 Hz; None: at the first one, as the reference code does for a track younger than
@@ -266,12 +249,8 @@ class LearnedConfig:
     nms_iou: float = 0.45  # ref
     # ours: Gaussian soft-NMS (dodt.learned.layout.soft_nms) with this sigma instead of NMS at
     # nms_iou (0). People walking close together, or one partly hidden behind another, have
-    # boxes that overlap by more than 0.45, and NMS kept one of them. Validation AP@0.5 <= 10 m of
-    # the shipped model 0.834 -> 0.875 (seeds 1000-1039; sigma chosen on seeds 2000-2039: 0.3 /
-    # 0.5 / 0.7 / 1.0 gave 0.854 / 0.862 / 0.861 / 0.857 against 0.825 with NMS). Perception
-    # benchmark frames, seeds 0-2: FP 0.83 -> 0.71 %, vel. err. 0.1372 -> 0.1369 m/s, pos. err.
-    # 0.0690 -> 0.0687 m, ID switches 86 -> 84, recall 0.5-5 m 98.7 -> 98.8 %; seeds 3-4: FP
-    # 0.95 -> 0.94 %, ID switches 80 -> 70, the errors the same or lower
+    # boxes that overlap by more than 0.45, and NMS kept one of them; soft-NMS lowers the score of
+    # an overlapping box instead of dropping it
     soft_nms_sigma: float = 0.5
     threads: int = 1  # onnxruntime intra-op threads
     # views of the image the network runs on, fused (dodt.learned.views; ours): ("full",) is the
@@ -293,19 +272,16 @@ class LearnedConfig:
     # width, else it is a part of that person's box) reads no depth inside that box that is not
     # farther than the front person's depth range (+ occluder_depth_margin). The percentile d~
     # leans to the nearer surface, so read through the person in front, a half-hidden person was
-    # lifted onto him; the stride-8 detector finds such people. Perception benchmark frames
-    # (FP % / vel. err. m/s / recall beyond 4 m % / ID switches / duplicates), seeds 0-2: off
-    # 1.02 / 0.1347 / 87.3 / 74 / 283, on 0.78 / 0.1351 / 91.8 / 98 / 339; seeds 3-4, held out:
-    # off 0.92 / 0.1338 / 85.9 / 72 / 243, on 0.63 / 0.1329 / 90.5 / 72 / 241. None: off
+    # lifted onto him; the stride-8 detector finds such people. A fraction of a box's height and
+    # width; None: off
     occluder_margin: float | None = 0.1
     occluder_depth_margin: float = 0.3  # m
     # ours: a person as tall as this, showing as high as the 2D box, stands at most fy * height /
     # box height away, so depths farther than that are the background seen past the person and are
     # not read (a box cut by the image's edge or an occluder is shorter: the bound only loosens).
     # A far person is narrow and the depth camera leaves holes at depth edges, so the background
-    # could hold most of the box's valid depths: without the bound, 477 of dodt+yolo's 930 false
-    # dynamic reports on the perception benchmark (seeds 0-2) lay within 3 degrees of a person's
-    # bearing, 335 of them 1-5 m behind him. None: no bound
+    # could hold most of the box's valid depths, and the box was lifted onto the background on the
+    # person's bearing, metres behind him. None: no bound
     max_person_height: float | None = 2.0  # m
     # ours: a box whose depth d~ is farther than this is dropped. The camera reports nothing beyond
     # its range (10 m), so near it the far half of a person's noisy depths is missing and the
@@ -327,56 +303,38 @@ class LearnedConfig:
     # ours: a mutual best match marks the fused box a person only when the two boxes' centres lie
     # within this (m, horizontally; 0: always). A person close to a wall or an obstacle lifts to
     # his own depth, while the fused box his 2D box best overlaps can be the structure 0.7-1 m
-    # behind him, which the person label then made a dynamic track (most of dodt+yolo's false
-    # reports on wall_pass). Perception benchmark frames, seeds 0-4 (FP % / vel. err. m/s / ID
-    # switches; recall unchanged): 0 1.26 / 0.1423 / 229; 0.8 1.21 / 0.1423 / 229; 0.5 0.97 /
-    # 0.1427 / 231; 0.35 0.93 / 0.1427 / 231 (dodt: 0.94 / 0.1392 / 64). In closed loop it cost: corridor
-    # seeds 0-99, dodt+yolo, one AMD EPYC, 75 -> 67 successes, 0 seeds to success and 8 to failure
-    # (p = 0.008), cause not traced; with the three rules below, off or on changes none of those 8
+    # behind him, which the person label then made a dynamic track (a false report of the wall)
     person_match_gate: float = 0.5
     # ours: a mutual best match does not mark a fused box taller than this (m) a person. People here
     # are at most 1.85 m tall; a taller box is an obstacle, which a 2D box cut by the image's side
-    # edge matches when its torso region reads the obstacle behind the person (on circles, a 3 m
-    # tall obstacle 2 m behind a person walking out of view was a dynamic report for 3-5 frames in
-    # every seed). Perception benchmark frames, seeds 0-2: FP 1.00 -> 0.91 %, nothing else
-    # changed (2.2 m: the same). 0: no bound
+    # edge matches when its torso region reads the obstacle behind the person (a tall obstacle
+    # behind a person walking out of view then became a dynamic report for a few frames). 0: no bound
     person_box_max_height: float = 2.5
     # ours: where the fused box of a mutual best match is lower than this fraction of the learned
     # box, it is a fragment of the person (the part within the depth range, or the part in view),
     # and the union of the two boxes replaces it; otherwise the fused box stays (match_box). A
     # track fed by the person's lifted box then saw a fragment a metre lower, which association
     # refused, and a second track started on the person: ID switches at the 5 m edge of the depth
-    # range. Perception benchmark frames, seeds 0-2, with person_box_max_height (FP % / vel. err.
-    # m/s / ID switches / recall 0.5-5 m % / beyond 4 m %): 0 (off) 0.91 / 0.1433 / 132 / 99.0 /
-    # 87.2; 0.6 1.02 / 0.1411 / 93 / 99.1 / 86.9; 0.8 0.97 / 0.1414 / 81 / 99.1 / 86.6
+    # range. 0: off
     fragment_height: float = 0.6
     # a track is a person when this fraction of its detections over person_span were person boxes
     # (ours; the ref uses the latest box alone). All over 2 / 30 s (3 of 3 frames at 30 Hz; 2 frames
     # at a lower rate): a track is labelled at its third frame
     # (67 ms after its first), not its second; a young track's velocity is its worst and a box
-    # lifted once from a far person's noisy depth can lie a metre off him. Perception benchmark
-    # frames, seeds 0-2, with the two rules above (FP % / vel. err. m/s / ID switches / recall 0.5-5
-    # m % / beyond 4 m %): 2 of 3 1.02 / 0.1411 / 93 / 99.1 / 86.9; 3 of 3 0.83 / 0.1390 / 86 / 98.9 /
-    # 86.6. Seeds 3-4 (held out): 0.94 / 0.1363 against 0.93 / 0.1417 before the three rules
+    # lifted once from a far person's noisy depth can lie a metre off him
     person_span: float = 2 / 30  # s
     person_fraction: float = 1.0
     # ours: a person box whose 3D box crosses the image's left or right edge casts no vote, either
     # way (dodt.geometry.box_cut_by_view_side): lifted from the part of the person in view, it lies
     # off him, and the part's centre slides along the edge as he walks in or out of view, so a
     # track labelled on such boxes reported a velocity made of that slide. A person track keeps its
-    # label while its boxes are cut. Perception benchmark frames, seeds 0-2: velocity error of the
-    # matched person-frames 0.1390 -> 0.1372 m/s (the 65 frames only dodt+yolo matched at the
-    # view's side had 0.61 m/s), recall 0.5-5 m 98.9 -> 98.7 %, FP unchanged; seeds 3-4, held out:
-    # 0.1363 -> 0.1336 m/s. True: every person box votes (before)
+    # label while its boxes are cut. True: every person box votes
     cut_boxes_vote: bool = False
     # a person track beyond the ensemble's depth range (depth.depth_max from the camera), where the
     # learned boxes are its only detections, coasts at most this long (ours; 0: as any track, for
     # track.coast_time). Such a track's velocity comes from boxes lifted from noisy far depth, and
-    # coasting on it drifts off its person: with the full coast time, 78 % of dodt+yolo's false
-    # dynamic reports on the benchmark's seed 0 were coasting person tracks, 90 % of them 5-10 m
-    # away. Perception benchmark, seeds 0-2 (FP % / ID switches / recall beyond 4 m %): 1 s (as
-    # before) 8.7 / 151 / 92.6; 0.4 s 6.0 / 146 / 89.5; 0.2 s 5.0 / 160 / 87.8; errors within 5 m
-    # and recall at 0.5-5 m the same for all three
+    # coasting on it drifts off its person and reports someone who is not there. A shorter coast
+    # loses more of the far people instead
     far_coast_time: float = 0.4  # s
     # ours: a coasting person track is dropped this long after its last detection (0: never) when its
     # image box lies in full view, nothing nearer hides it (less than unseen_occluder_fraction of
@@ -384,10 +342,7 @@ class LearnedConfig:
     # image box by unseen_iou: the detector looks right at its place and sees no person there.
     # Such tracks were most of dodt+yolo's false and duplicate reports: coasting on a last velocity
     # that had drifted 0.5-1.5 m off their person, who was tracked again by another track or not
-    # detected at all. Perception benchmark frames, seeds 0-4 (FP % / duplicates / ID switches /
-    # vel. err. m/s / recall 0.5-5 m % / beyond 4 m %): off 1.70 / 1277 / 244 / 0.1435 / 99.3 /
-    # 87.5; 6 frames, IoU 0.5 (these) 1.26 / 649 / 229 / 0.1423 / 99.1 / 86.5; IoU 0.3 1.57 / 932;
-    # IoU 0.7 1.29 / 563 / 242 / 0.1453; 3 frames, IoU 0.5 1.21 / 467 / 205 / 0.1422 / 98.8 / 85.1
+    # detected at all
     unseen_after: float = 6 / 30  # s: 6 missed frames at 30 Hz
     unseen_iou: float = 0.5
     unseen_occluder_fraction: float = 0.3

@@ -2,8 +2,8 @@
 
 Two sweeps over the same seeds of a scenario (a baseline and a change) are paired seed by seed. The
 outcome of one corridor episode turns on small things (a replan 0.1 s apart, a track one frame
-older), so any change of the planner or the perception turns 10-45 of 200 seeds each way; the two
-success rates alone cannot tell a real gain from that churn. The paired question can: among the
+older), so any change of the planner or the perception turns some seeds each way; the two success
+rates alone cannot tell a real gain from that churn. The paired question can: among the
 seeds whose outcome differs, are those turned to success more than a fair coin would give? That is
 McNemar's exact test, a two-sided sign test on the discordant seeds; seeds with the same outcome in
 both sweeps say nothing about the change and do not enter it. The verdict is the success's; every

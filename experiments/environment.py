@@ -2,18 +2,15 @@
 
 A closed-loop episode is bit for bit the same on one machine and installation, but not across
 them: its outcome turns on small things (a replan 0.1 s apart, a track one frame older), and the
-same corridor seeds and code gave 75.0 % and 65.5 % successes on two machines. Measured on one
-machine (corridor, dodt, against a sweep of the same seeds there):
+same seeds and code can give different success rates on two machines. What changes the episodes
+(docs/experiments.md, 2026-11-25, has the measurements):
 
-- the same episodes bit for bit: numba compiling for haswell instead of the host's znver5, with
-  NumPy's AVX-512 kernels off (seeds 0-19); NumPy 2.3.5 / SciPy 1.16.3 instead of 2.4.6 / 1.17.1
-  (seeds 0-7);
-- every episode otherwise: OpenBLAS's SkylakeX kernels, which it picks by itself on that
-  processor, instead of the Haswell ones the machine's environment named (OPENBLAS_CORETYPE;
-  seeds 0-9, 4 outcomes changed); Mesa's software rasteriser (llvmpipe, behind PyBullet's EGL
-  plugin), which compiles its shaders for the host processor, with its SIMD off (GALLIUM_NOSSE=1:
-  some 110 pixels of each 640x480 depth frame come out otherwise, at triangle edges, valid
-  against invalid; seeds 0-4, 3 outcomes changed).
+- not the processor numba compiles for, NumPy's AVX-512 kernels, or NumPy's and SciPy's minor
+  versions: the episodes stay the same bit for bit;
+- OpenBLAS's kernel set, which it picks by itself from the processor unless the environment names
+  one (OPENBLAS_CORETYPE), and Mesa's software rasteriser (llvmpipe, behind PyBullet's EGL plugin),
+  which compiles its shaders for the host processor and draws some pixels at triangle edges
+  otherwise with its SIMD off (GALLIUM_NOSSE=1): every episode can change.
 
 So the record holds the processor, the BLAS kernels, the renderer and Mesa's version beside the
 packages, and the variables set by hand that change how they compute; sweeps from different

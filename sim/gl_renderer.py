@@ -18,9 +18,9 @@ ambient term (not PyBullet's shading: colours differ from PyBullet's images, dep
 
 Depth precision: PyBullet's EGL plugin renders into a 16-bit depth buffer (its depth values step by
 exactly 2^-16: 1 mm at 4.6 m, far below the sensor noise). The depth read back here (24 bits) is
-rounded onto that grid (``depth_bits=16``, the default), because DODT's output turned on it: flying
-the static_only scenario, seeds 0 and 2 gave 31 frames with a wall fragment reported moving at 24
-bits and none on PyBullet's grid, as with PyBullet's renderer.
+rounded onto that grid (``depth_bits=16``, the default), because DODT's output turns on it: at 24
+bits a wall fragment of the static_only scenario can be reported moving where PyBullet's grid, as
+PyBullet's renderer, gives none.
 
 The GL context is created once per process and kept (``shared_context``): successive worlds in one
 process (a sweep worker's episodes) reuse it; a renderer frees only its own buffers.

@@ -115,7 +115,7 @@ def _spawn() -> tuple[subprocess.Popen, Connection]:
     ours, theirs = socket.socketpair()
     env = dict(os.environ)
     # Mesa's llvmpipe rasterises on extra threads by default; beside a busy parent on two cores they only
-    # contend (corridor closed loop: 1.18x real time with them, 1.23x without). A user's setting wins.
+    # contend. A user's setting wins.
     env.setdefault("LP_NUM_THREADS", "0")
     # (the child ends itself when this process is gone: sim.parent_watch)
     proc = subprocess.Popen([sys.executable, "-m", "sim.render_process", str(theirs.fileno()), str(os.getpid())],

@@ -66,8 +66,7 @@ class World:
         control and planning experiments that need no images. render=False keeps the camera's
         clock but draws nothing: every camera period still gives a frame (pose, intrinsics, stamp,
         with a depth image of no returns and no colour) and its ground truth (segmentation None),
-        for planning against ground-truth perception at a fraction of the cost (an oracle episode of
-        corridor.toml ran 7.5 times faster: 1.8 s against 13.6 s). light_direction (world frame,
+        for planning against ground-truth perception at a fraction of the cost. light_direction (world frame,
         settable between frames as ``world.light_direction``) is passed to the renderer; None
         keeps PyBullet's default light.
 

@@ -10,8 +10,7 @@ the legs and beside the torso), and the whole box's median lay 0.4-0.9 m behind 
 depths are read from the box's central part, where the torso is (``core_x``, ``core_y``; the
 whole box when that holds too few valid depths), and d~ is their 30th percentile
 (``depth_percentile``; 50 is the paper's median), which leans to the nearer surface, the person
-before the background: lifted boxes more than 0.5 m from every person fell from 23 % (median of
-the torso region) to 4 % on the circles scenario. The box is at least ``min_thickness`` deep and
+before the background. The box is at least ``min_thickness`` deep and
 centred ``center_behind_median`` behind d~ (a body seen from the front shows only its front).
 Depths farther than a person of ``max_person_height`` showing as high as the 2D box could stand
 are dropped first (the background past a narrow far person, whose edges the depth camera leaves

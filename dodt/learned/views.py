@@ -3,10 +3,8 @@
 The network sees a 640x480 image at 352x256: a person 8-10 m away is some 10 px wide there, and
 its one box per stride-16 cell places people standing side by side badly. Running it also on the
 mirrored image and on an enlarged central crop, and fusing the three sets of boxes, raises the
-precision and places far people better, at three times the inference time. Validation AP@0.5
-within 10 m (seeds 1000-1039, `dodt-nav eval-detector --views ...`): the shipped model 0.834
-alone, 0.836 with the mirror, 0.860 with mirror and centre; the model shipped before it 0.822,
-0.823, 0.841. Off by default (`LearnedConfig.views`).
+precision and places far people better, at three times the inference time (`dodt-nav
+eval-detector --views ...` measures it). Off by default (`LearnedConfig.views`).
 
 A view is a region of the image (fractions of its width and height) and whether it is mirrored.
 The region is cut from the image as given, resized to the network's input and run; its boxes are
