@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.scenario import PERSON_HEIGHT_RANGE, PERSON_RADIUS, Person, Scenario, circle_waypoints
+from sim.scenario import Scenario
+from sim.scenario_parts import PERSON_HEIGHT_RANGE, PERSON_RADIUS, Person, circle_waypoints
 
 HUMANOID_URDF = "humanoid/humanoid.urdf"
 WALK_CLIP = "data/motions/humanoid3d_walk.txt"
