@@ -11,7 +11,8 @@ __all__ = ["Scenario", "ScenarioError", "World", "load_scenario", "scenario_path
 
 
 def __getattr__(name):
-    # World pulls in PyBullet; scenario validation alone should not.
+    # World pulls in PyBullet (about a second); scenario validation alone should not. Start-up only: no
+    # module of sim imports the package itself, so this hides no import cycle.
     if name == "World":
         from sim.world import World
 

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from dodt.frames import CameraIntrinsics
-from sim.scenario import RENDERER_CHOICES, RENDERERS  # noqa: F401 (RENDERERS: re-exported)
+from sim.scenario_parts import RENDERER_CHOICES, RENDERERS  # noqa: F401 (RENDERERS: re-exported)
 
 # Optical frame (x right, y down, z forward) -> OpenGL camera frame (x right, y up, z back).
 _OPTICAL_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])

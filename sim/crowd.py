@@ -41,7 +41,8 @@ import numpy as np
 from numba import njit
 
 from sim.people import WalkerPose, Walker
-from sim.scenario import PERSON_RADIUS, PERSON_SPEED_RANGE, Scenario
+from sim.scenario import Scenario
+from sim.scenario_parts import PERSON_RADIUS, PERSON_SPEED_RANGE
 
 CARROT = 1.0  # m along the route ahead of the person: where it heads
 TURN_RATE = 2 * math.pi  # rad/s: the body turns toward its motion at most this fast

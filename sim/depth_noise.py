@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from sim.scenario import Noise
+from sim.scenario_parts import Noise
 
 _INVALID_FAR = np.float32(1e4)  # m added to invalid pixels for the neighbourhood minimum
 

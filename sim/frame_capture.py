@@ -18,7 +18,7 @@ from sim.camera import decode_render
 from sim.controller import DroneState
 from sim.depth_noise import DepthNoiseModel
 from sim.ground_truth import GroundTruth, ObstacleTruth
-from sim.scenario import Camera
+from sim.scenario_parts import Camera
 
 MAX_DEPTH = 65.535  # m: the largest depth that uint16 millimetres hold
 

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from sim.scenario import Noise
+from sim.scenario_parts import Noise
 
 
 class OdometryNoise:

@@ -21,8 +21,10 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from sim.scenario import PERSON_HEIGHT_RANGE, PERSON_RADIUS, Person, Scenario, circle_waypoints
+from sim.scenario import Scenario
+from sim.scenario_parts import PERSON_HEIGHT_RANGE, PERSON_RADIUS, Person, circle_waypoints
 
 HUMANOID_URDF = "humanoid/humanoid.urdf"
 WALK_CLIP = "data/motions/humanoid3d_walk.txt"
@@ -47,7 +49,7 @@ _CLIP_JOINTS = (
 )
 _SPHERICAL = [j for j, _, n in _CLIP_JOINTS if n == 4]
 _REVOLUTE = [j for j, _, n in _CLIP_JOINTS if n == 1]
-_Q_X90 = np.array([math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)])  # (x, y, z, w)
+_Q_X90 = Rotation.from_euler("x", math.pi / 2).as_quat()  # (x, y, z, w): +90 deg about x
 
 
 # --------------------------------------------------------------------------- quaternions (x, y, z, w)
@@ -434,7 +436,7 @@ class Walker:
         # Clip frame (x forward, y up, z right-ish) -> world after the +90 deg roll: (x, -z, y).
         lx, ly = off[0] * self.k, -off[2] * self.k
         pos = [pose.x + cy * lx - sy * ly, pose.y + sy * lx + cy * ly, off[1] * self.k]
-        q_yaw = np.array([0.0, 0.0, math.sin(pose.yaw / 2), math.cos(pose.yaw / 2)])
+        q_yaw = Rotation.from_euler("z", pose.yaw).as_quat()  # (x, y, z, w)
         quat = _qmul(q_yaw, table.base_quat[pose.k])
         return pos, quat, table.targets[pose.k]
 

@@ -18,6 +18,8 @@ import numpy as np
 
 from dodt.frames import CameraIntrinsics
 from sim.camera import load_egl, quiet_stdout, render_buffers
+from sim.gl_renderer import GLRenderer, GLUnavailable, GLUnsupportedScene, shared_context
+from sim.render_process import RenderProcess
 
 with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
@@ -47,14 +49,10 @@ class RenderBackend:
         b = cls(client, intrinsics)
         b.name = "tiny" if render else "none"
         if render_process:
-            from sim.render_process import RenderProcess
-
             b.process = RenderProcess(*process_args)
             b.name = f"{b.process.renderer} (render process)"
             return b
         if render and want in ("auto", "gl"):
-            from sim.gl_renderer import GLUnavailable, shared_context
-
             try:
                 shared_context()  # made once per process, before any body: PyBullet's EGL plugin is the fallback
                 b._want_gl = True
@@ -92,8 +90,6 @@ class RenderBackend:
         falls back to TinyRenderer with a warning (an error when "gl" was asked for by name)."""
         if not self._want_gl:
             return
-        from sim.gl_renderer import GLRenderer, GLUnsupportedScene
-
         try:
             self.gl = GLRenderer(p, self.client, self.intrinsics)
         except GLUnsupportedScene as e:

@@ -1,4 +1,4 @@
-"""Camera rendering in a second process, so that it runs beside the rest of a closed loop.
+"""Camera rendering in a second process, so that it runs beside the rest of a closed loop: the parent's side.
 
 The child builds its own copy of the world from the same scenario and seed (same bodies, same
 colours, the same depth-noise stream) and renders nothing but what it is asked: for each captured
@@ -7,6 +7,8 @@ renders, adds the depth noise and sends the frame's images back over a socket (d
 colour, obstacle ids). Requests are answered in order, so the child draws the noise frame after
 frame in capture order, as the parent would: the frames are bit-identical to rendering in the
 parent (tested), and the parent spends no time on noise.
+The child runs sim.render_child, which this module does not import: the parent's side does not
+depend on sim.world.
 
 It pays off only when the parent has something to do while the child renders: the World asks for
 this with ``frame_latency >= 1`` (a frame is delivered one or more camera periods after its
@@ -24,7 +26,6 @@ import os
 import socket
 import subprocess
 import sys
-import traceback
 from multiprocessing.connection import Connection
 
 import numpy as np
@@ -35,64 +36,6 @@ _REPLY_TIMEOUT_S = 120.0  # one frame: tens of milliseconds
 
 class RenderProcessError(RuntimeError):
     """The render process failed or stopped answering."""
-
-
-def _serve(conn) -> None:
-    """The child's life: worlds one after another, each built from the parent's settings and served until
-    the parent releases it (None); the interpreter, its imports and compiled code, and the GL context
-    serve them all. Ends when the parent closes its end or a world fails."""
-    while True:
-        try:
-            args = conn.recv()
-        except (EOFError, OSError, KeyboardInterrupt):
-            return
-        if args is None or not _serve_world(conn, *args):
-            return
-
-
-def _serve_world(conn, scenario, seed, renderer, segmentation, light_direction, color) -> bool:
-    """Build one world and answer its frames until the parent releases it: True, ready for another;
-    False when the parent is gone or something failed (reported to the parent)."""
-    from sim.world import World  # in the child only
-
-    try:
-        world = World(scenario, seed=seed, renderer=renderer, segmentation=segmentation,
-                      light_direction=light_direction, color=color)
-    except Exception as e:  # noqa: BLE001 - reported to the parent, which raises it
-        conn.send(("error", f"{type(e).__name__}: {e}"))
-        return False
-    conn.send(("ready", world.renderer))
-    # The frame reset() rendered (t = 0, the start pose) answers frame 0: the EGL renderer's first frames are
-    # not all alike (the same pose's colour differed between a first and a later render), so the child renders
-    # exactly the frames the parent would, in the same order.
-    first = world.last_images
-    try:
-        while True:
-            msg = conn.recv()
-            if msg is None:
-                return True
-            seq, t, pos, quat, people, light = msg
-            r0 = world.render_wall_time  # the renderer's share (benchmarks), without the noise
-            if seq == 0 and first is not None:
-                images, first = first, None
-            else:
-                world.light_direction = light
-                images = world.images_at(pos, quat, people)
-            render_s = world.render_wall_time - r0
-            conn.send(("frame", seq, render_s, [None if a is None else (a.dtype.str, a.shape) for a in images]))
-            for a in images:
-                if a is not None:
-                    conn.send_bytes(memoryview(np.ascontiguousarray(a)).cast("B"))
-    except (EOFError, OSError, KeyboardInterrupt):  # the parent closed its end
-        return False
-    except Exception:  # noqa: BLE001
-        try:
-            conn.send(("error", traceback.format_exc(limit=5)))
-        except (BrokenPipeError, OSError):
-            pass
-        return False
-    finally:
-        world.close()
 
 
 _IDLE: list[tuple[subprocess.Popen, Connection]] = []  # released children of this process, ready for a world
@@ -118,7 +61,7 @@ def _spawn() -> tuple[subprocess.Popen, Connection]:
     # contend. A user's setting wins.
     env.setdefault("LP_NUM_THREADS", "0")
     # (the child ends itself when this process is gone: sim.parent_watch)
-    proc = subprocess.Popen([sys.executable, "-m", "sim.render_process", str(theirs.fileno()), str(os.getpid())],
+    proc = subprocess.Popen([sys.executable, "-m", "sim.render_child", str(theirs.fileno()), str(os.getpid())],
                             pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
     theirs.close()
     conn = Connection(os.dup(ours.fileno()))
@@ -248,12 +191,3 @@ class RenderProcess:
             self._proc.wait(timeout=5.0)
         self._proc = self._conn = None
         self._healthy = False
-
-
-if __name__ == "__main__":  # the child: python -m sim.render_process FD PARENT_PID
-    from sim.parent_watch import exit_with_parent
-
-    exit_with_parent(int(sys.argv[2]))
-    _serve(Connection(int(sys.argv[1])))
-    # Leave without the interpreter's teardown: with llvmpipe's threads it can hang after EGL was used.
-    os._exit(0)

@@ -21,7 +21,8 @@ with quiet_stdout():  # PyBullet prints its build time on import
 
 from sim.ground_truth import STRUCTURE_ID, ObstacleTruth
 from sim.people import HUMANOID_URDF, Walker, person_height, plan_path
-from sim.scenario import Obstacle, Scenario
+from sim.scenario import Scenario
+from sim.scenario_parts import Obstacle
 from sim.vehicle import QUADROTOR_URDF
 
 GROUP_DRONE, GROUP_STATIC = 1, 4  # collision filter groups: the drone collides with static bodies only

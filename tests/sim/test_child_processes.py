@@ -1,5 +1,5 @@
-"""Child processes end with their parent: sim.parent_watch, and the render process (sim.render_process)
-when its start fails and when the process that started it is killed."""
+"""Child processes end with their parent: sim.parent_watch, and the render process (sim.render_process,
+its child running sim.render_child) when its start fails and when the process that started it is killed."""
 from __future__ import annotations
 
 import os
@@ -65,10 +65,10 @@ def test_a_render_process_that_does_not_start_in_time_is_ended(monkeypatch):
     """The audit's 1,000 people: the render process did not answer within its start time, the error was
     raised and the child went on building (1.6 GB). Now it is ended with the error."""
     monkeypatch.setattr(render_process, "_START_TIMEOUT_S", 0.01)
-    before = set(children(os.getpid(), b"sim.render_process"))
+    before = set(children(os.getpid(), b"sim.render_child"))
     with pytest.raises(RenderProcessError, match="did not answer within"):
         RenderProcess(parse_scenario(BASE, "test.toml"), 0, "tiny", False)
-    assert wait_for(lambda: not set(children(os.getpid(), b"sim.render_process")) - before, timeout=10)
+    assert wait_for(lambda: not set(children(os.getpid(), b"sim.render_child")) - before, timeout=10)
 
 
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
@@ -88,8 +88,8 @@ def test_the_render_process_ends_when_the_process_that_started_it_is_killed(how)
         os.path.dirname(__file__))))
     try:
         assert int(parent.stdout.readline()) == parent.pid
-        assert wait_for(lambda: children(parent.pid, b"sim.render_process"), timeout=60), "no render process"
-        (child,) = children(parent.pid, b"sim.render_process")
+        assert wait_for(lambda: children(parent.pid, b"sim.render_child"), timeout=60), "no render process"
+        (child,) = children(parent.pid, b"sim.render_child")
         os.kill(parent.pid, how)
         parent.wait(timeout=30)
         assert wait_for(lambda: not alive(child), timeout=10), "the render process outlived its parent by 10 s"
