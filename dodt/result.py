@@ -6,13 +6,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-def _rounded(a) -> list[float]:
-    """The values as floats rounded to 4 decimals (a float array's tolist() gives the floats at once)."""
-    if isinstance(a, np.ndarray) and a.dtype.kind == "f":
-        return [round(x, 4) for x in a.tolist()]
-    return [round(float(x), 4) for x in a]
-
-
 @dataclass(frozen=True, eq=False)
 class TrackedObstacle:
     id: int
@@ -32,13 +25,6 @@ class TrackedObstacle:
     # or shifts as more of it comes into view has some); None: as ``velocity``, ``acceleration``
     filter_velocity: np.ndarray | None = None
     filter_acceleration: np.ndarray | None = None
-
-    def to_json(self) -> dict:
-        r = _rounded
-        return {"id": self.id, "center": r(self.center), "size": r(self.size), "velocity": r(self.velocity),
-                "acceleration": r(self.acceleration), "dynamic": self.dynamic, "coasting": self.coasting,
-                "age": round(self.age, 3), "is_person": self.is_person,
-                "filter_velocity": r(self.velocity if self.filter_velocity is None else self.filter_velocity)}
 
 
 @dataclass(frozen=True, eq=False)

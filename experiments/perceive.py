@@ -37,6 +37,7 @@ from dodt.config import override
 from dodt.floor import camera_pose, fit_floor_frames
 from dodt.pipeline import DODT, MODULES
 from dodt.presets import PRESETS, preset
+from dodt.protocol import TrackReport
 from experiments.sequences import SequenceError, open_sequence
 
 FLOOR_FRAMES = 10  # the first readable frames the floor is fitted on
@@ -265,7 +266,7 @@ def perceive(sequence: str | Path, out: str | Path, config: str = "dodt", assign
                     timings[m].append(r.timings_ms.get(m, 0.0))
             tracks_file.write(json.dumps({"seq": ref.seq, "stamp": ref.stamp, "skipped": r.skipped,
                                           "bad_pixels": r.bad_pixels,
-                                          "obstacles": [o.to_json() for o in r.obstacles]}) + "\n")
+                                          "obstacles": [TrackReport.from_tracked(o).to_json() for o in r.obstacles]}) + "\n")
             dyn = [o.id for o in r.obstacles if o.dynamic]
             dynamic_ids.update(dyn)
             track_ids.update(o.id for o in r.obstacles)

@@ -35,4 +35,4 @@ def test_a_class_with_the_methods_and_flags_is_a_perception_module():
 
     assert isinstance(Nothing(), PerceptionModule) and not isinstance(NoUpdate(), PerceptionModule)
     out = PerceptionOutput(stamp=1.5, obstacles=(), clear_boxes=((np.zeros(3), np.ones(3)),))
-    assert out.tracks == [] and out.timings_ms == {} and out.skipped is None
+    assert out.tracks == () and out.timings_ms == {} and out.skipped is None
