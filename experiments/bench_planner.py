@@ -17,6 +17,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from dodt.context import EpisodeContext, reset_with_context
+from experiments.episode import run_episode
+from experiments.episode_config import EpisodeConfig
+from experiments.guards import planner_telemetry
+from experiments.registry import DEFAULT_PLANNER, make_planner
 from planner.types import PlannerInput, Trajectory
 from planner.voxel_map import VoxelMap
 from sim.vehicle import load_vehicle
@@ -35,10 +40,11 @@ class _Recorder:
     """A planner that records what it is asked and what the wrapped planner answers."""
 
     def __init__(self, planner):
-        self.planner, self.snapshots = planner, []
+        self.planner, self.snapshots, self.context = planner, [], None
 
-    def reset(self) -> None:
-        self.planner.reset()
+    def reset(self, context: EpisodeContext | None = None) -> None:
+        self.context = context
+        reset_with_context(self.planner, context)
 
     def plan(self, inp: PlannerInput) -> Trajectory:
         occ = inp.occupancy  # the input as the planner gets it, before the call (kept if the call raises)
@@ -50,9 +56,8 @@ class _Recorder:
         self.snapshots[-1] = replace(snap, plan=out)
         return out
 
-    @property
-    def path(self):
-        return getattr(self.planner, "path", None)
+    def telemetry(self) -> dict:
+        return planner_telemetry(self.planner)
 
 
 def _map(s: _Snapshot) -> VoxelMap:
@@ -66,25 +71,21 @@ def _same(a: Trajectory, b: Trajectory | None) -> bool:
             and np.array_equal(a.velocities, b.velocities) and np.array_equal(a.accelerations, b.accelerations))
 
 
-def record(scenario: str, seed: int, perception: str = "dodt", **episode) -> list[_Snapshot]:
+def record(scenario: str, seed: int, perception: str = "dodt", **episode) -> tuple[list[_Snapshot], EpisodeContext]:
     """The planner inputs and plans of one closed-loop episode with the default planner (``episode``:
-    experiments.episode.EpisodeConfig fields)."""
-    from experiments.episode import EpisodeConfig, default_planner, run_episode
-
-    rec = _Recorder(default_planner(load_vehicle().radius))
+    experiments.episode_config.EpisodeConfig fields), and the episode's context."""
+    rec = _Recorder(make_planner(DEFAULT_PLANNER, load_vehicle().radius))
     run_episode(scenario, seed=seed, perception=perception, planner=rec, cfg=EpisodeConfig(**episode))
-    return rec.snapshots
+    return rec.snapshots, replace(rec.context, static_map=None, seen=None)
 
 
-def replay(snapshots: list[_Snapshot], robot_radius: float, repeats: int = 3) -> dict:
+def replay(snapshots: list[_Snapshot], context: EpisodeContext, repeats: int = 3) -> dict:
     """Times (ms) of every plan call over ``repeats`` replays, and how many replayed plans (of all replays)
     equal the loop's."""
-    from experiments.episode import default_planner
-
     times, same = [], 0
     for _ in range(repeats):
-        planner = default_planner(robot_radius)
-        planner.reset()
+        planner = make_planner(DEFAULT_PLANNER, context.vehicle.radius)
+        planner.reset(context)
         run, version, m = [], None, None
         for s in snapshots:
             inp = s.inp
@@ -102,10 +103,9 @@ def replay(snapshots: list[_Snapshot], robot_radius: float, repeats: int = 3) ->
 
 def run(scenario: str = "corridor", seeds=(0, 1), perception: str = "dodt", repeats: int = 3) -> dict:
     """Records and replays ``seeds`` of ``scenario``; prints and returns the figures."""
-    radius = load_vehicle().radius
     per_rep, same, n = [], 0, 0
     for seed in seeds:
-        r = replay(record(scenario, seed, perception), radius, repeats)
+        r = replay(*record(scenario, seed, perception), repeats=repeats)
         per_rep.append(r["ms"])
         same, n = same + r["same"], n + r["n"]
     ms = np.concatenate(per_rep, axis=1)  # (repeats, plans)

@@ -16,12 +16,16 @@ import json
 import re
 import subprocess
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from experiments.config import Settings
 from experiments.environment import distinct
+from sim import load_scenario
+from experiments.episode_config import EpisodeConfig
+from experiments.registry import configured, planner_label
 from experiments.sweep import (RESULTS, SweepError, _append, _dist, _end_with_newline, _Progress, aggregate,
                                check_same_setup, describe_environment, read_results, run_tasks)
 
@@ -54,22 +58,18 @@ def split_seeds(split: str, count: int) -> list[int]:
 
 
 def _scenario(family: str, people: str):
-    from sim import load_scenario
-
     sc = load_scenario(family)
     return sc.with_values({"crowd.sees_drone": PEOPLE[people]}) if sc.people else sc
 
 
 def run_benchmark(out: Path, split: str, count: int, families=FAMILIES, modes=MODES, people=tuple(PEOPLE),
                   jobs: int = 1, dask_address: str | None = None, cfg=None, progress: bool = True,
-                  settings=None, planner: str | None = None) -> dict:
+                  settings=None, planner: str | None = None, shield: bool = False) -> dict:
     """Run what is missing of the benchmark into ``out``; write and return the report. settings: configuration
-    overrides (experiments.config); planner: a ``module:Class`` spec, None for the default planner."""
-    from experiments.config import Settings
-    from experiments.episode import EpisodeConfig
-
+    overrides (experiments.config); planner: a ``module:Class`` spec, None for the default planner; shield:
+    the plug-in planner behind the passive-safety shield."""
     settings = settings or Settings()
-    cfg = settings.episode_config(cfg or EpisodeConfig())
+    cfg = configured(settings, "episode", cfg or EpisodeConfig())
     seeds = split_seeds(split, count)
     out = Path(out)
     cells, scenarios = [], {}
@@ -93,13 +93,11 @@ def run_benchmark(out: Path, split: str, count: int, families=FAMILIES, modes=MO
         if wrong:
             raise SweepError(f"{folder}: holds results of another configuration (perception, static map or frame "
                              f"latency); use another --out folder")
-        check_same_setup(folder / RESULTS, done[c].values(), settings, planner)
+        check_same_setup(folder / RESULTS, done[c].values(), settings, planner_label(planner, shield))
     if jobs > 1 or dask_address:
-        from dataclasses import replace
-
         cfg = replace(cfg, render_process=False)  # the cores are busy with episodes already
     tasks = [(c, (scenarios[(c.family, c.people)], seed, c.perception, str(out / c.folder / "episodes"), False, cfg,
-                  settings, planner))
+                  settings, planner, shield))
              for seed in seeds for c in cells if seed not in done[c]]
     total = len(seeds) * len(cells)
     bar = _Progress(total, total - len(tasks)) if progress and tasks else None
@@ -116,7 +114,7 @@ def run_benchmark(out: Path, split: str, count: int, families=FAMILIES, modes=MO
         bar.close()
     report = build_report(out, split, seeds, cells, done)
     if planner is not None:
-        report["planner"] = planner
+        report["planner"] = planner_label(planner, shield)
     if settings:
         report["config"] = {"set": settings.assignments()}
     report["wall_s_this_run"] = round(time.perf_counter() - t0, 1)

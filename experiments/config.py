@@ -1,127 +1,76 @@
 """Configuration from TOML files and the command line: ``--config FILE.toml`` and ``--set key=value``.
 
-Sections and the configuration each one overrides:
-
-- ``episode``: experiments.episode.EpisodeConfig (``episode.plan_rate``, ``episode.duration``, ...);
-- ``shield``: planner.shield.ShieldConfig of the default planner (``shield.a_brake``);
-- ``navigator``: planner.navigator.NavigatorConfig of the default planner, with its nested sections
-  (``navigator.cruise_speed``, ``navigator.mpc.horizon``, ``navigator.maneuvers.<field>``);
-- ``map``: planner.voxel_map.MapConfig of the episode's static map, after the episode sizes it to the
-  scenario (``map.p_hit``);
-- ``dodt``: dodt.config.DODTConfig of the DODT perception modes, on top of the mode's preset
-  (``dodt.kalman.q_pos``; dodt.config.override);
-- ``moving_rule``: experiments.perception_modes.MovingTrackRule of the DODT perception modes, which tracks
-  besides DODT's dynamic ones the planner avoids (``moving_rule.min_speed``);
-- ``oracle``: experiments.perception_modes.OracleConfig of the oracle perception modes, on top of the mode's
-  own (``oracle.max_range``; oracle-noisy starts from its velocity noise).
+Generic: it knows no section. The sections (``episode``, ``shield``, ``navigator``, ``map``, ``dodt``,
+``moving_rule``, ``oracle``, and ``planner`` / ``perception`` for a plug-in that declares a
+configuration dataclass) and the dataclass each one overrides are wired in experiments.registry, which
+passes them here as ``{name: default configuration}``.
 
 A file holds TOML tables of these sections (``[navigator.mpc]`` then ``horizon = 30``); ``--set`` takes
 ``section.field=value`` with the value a TOML literal (``2.5``, ``true``, ``[3, 5]``, ``"depth"``; a bare
 word is taken as a string); ``none`` sets an optional field to None. ``--set`` options apply after the file,
-in the order given; the last value of a key wins. Unknown keys and values of the wrong type are errors
-naming the key. Each summary records ``config``: ``set`` (the overrides, by dotted key) and the full
-values of every overridden section; with no overrides nothing is added and results are bit-identical
-to a run without these options.
-
-The shield and navigator sections configure the default planner only; a plug-in planner
-(experiments.plugins) is built with no arguments. The dodt and moving_rule sections configure the DODT
-modes only, the oracle section the oracle modes only; a plug-in perception module reads none.
+in the order given; the last value of a key wins. Unknown keys, values of the wrong type, numbers that are
+not finite and values outside a key's range (the ``check`` hook: experiments.config_limits for the built-in
+sections, a field's ``metadata["range"]`` for a plug-in's) are errors naming the key. Each summary records
+``config``: the overrides and the full effective values of every section the episode used.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import typing
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-SECTIONS = ("episode", "shield", "navigator", "map", "dodt", "moving_rule", "oracle")
+MAX_CONFIG_BYTES = 1 << 20  # a --config file larger than this is refused before it is parsed
+MAX_KEY_DEPTH = 8  # dotted parts in a key: deeper tables are refused
+
+Check = Callable[[str, Any], None]  # (full dotted key, value) -> None; ValueError naming what is wrong
 
 
 class ConfigError(ValueError):
     """A bad configuration file, key or value; the message names it."""
 
 
-def _section_classes() -> dict[str, type]:
-    from dodt.config import DODTConfig
-    from experiments.episode import EpisodeConfig
-    from experiments.perception_modes import MovingTrackRule, OracleConfig
-    from planner.navigator import NavigatorConfig
-    from planner.shield import ShieldConfig
-    from planner.voxel_map import MapConfig
-
-    return {"episode": EpisodeConfig, "shield": ShieldConfig, "navigator": NavigatorConfig, "map": MapConfig,
-            "dodt": DODTConfig, "moving_rule": MovingTrackRule, "oracle": OracleConfig}
+Items = tuple[tuple[str, Any], ...]
 
 
 @dataclass(frozen=True)
 class Settings:
-    """Overrides by section, each a tuple of (dotted field path within the section, value) in the order they
+    """Overrides by section: ``((section, ((dotted field path, value), ...)), ...)`` in the order they
     apply. Frozen and made of plain values: picklable, and equal when the overrides are."""
 
-    episode: tuple[tuple[str, Any], ...] = ()
-    shield: tuple[tuple[str, Any], ...] = ()
-    navigator: tuple[tuple[str, Any], ...] = ()
-    map: tuple[tuple[str, Any], ...] = ()
-    dodt: tuple[tuple[str, Any], ...] = ()
-    moving_rule: tuple[tuple[str, Any], ...] = ()
-    oracle: tuple[tuple[str, Any], ...] = ()
+    sections: tuple[tuple[str, Items], ...] = ()
 
     def __bool__(self) -> bool:
-        return any(getattr(self, s) for s in SECTIONS)
+        return any(items for _, items in self.sections)
+
+    def section(self, name: str) -> Items:
+        """The overrides of one section (empty when it has none)."""
+        return next((items for s, items in self.sections if s == name), ())
+
+    def names(self) -> tuple[str, ...]:
+        """The sections with overrides."""
+        return tuple(s for s, items in self.sections if items)
 
     def assignments(self) -> dict[str, Any]:
         """{"section.field": value} of every override (JSON-ready: tuples as lists)."""
-        return {f"{s}.{k}": _jsonable(v) for s in SECTIONS for k, v in getattr(self, s)}
+        return {f"{s}.{k}": _jsonable(v) for s, items in self.sections for k, v in items}
 
-    # ------------------------------------------------------------ applying
-    def apply(self, section: str, cfg):
-        """``cfg`` (the section's dataclass) with the section's overrides applied; ``cfg`` itself without any."""
-        items = getattr(self, section)
-        return _apply(cfg, items, section) if items else cfg
+    def apply(self, section: str, cfg, check: Check | None = None):
+        """``cfg`` (the section's dataclass) with the section's overrides applied, each value checked by
+        ``check``; ``cfg`` itself without any."""
+        items = self.section(section)
+        return _apply(cfg, items, section, check) if items else cfg
 
-    def episode_config(self, cfg):
-        return self.apply("episode", cfg)
-
-    def shield_config(self, cfg):
-        return self.apply("shield", cfg)
-
-    def navigator_config(self, cfg):
-        return self.apply("navigator", cfg)
-
-    def map_config(self, cfg):
-        return self.apply("map", cfg)
-
-    def moving_rule_config(self, cfg):
-        return self.apply("moving_rule", cfg)
-
-    def oracle_config(self, cfg):
-        return self.apply("oracle", cfg)
-
-    def dodt_assignments(self) -> tuple[str, ...]:
-        """The dodt section as dodt.config.override's ``section.field=value`` strings."""
-        return tuple(f"{k}={_override_text(v)}" for k, v in self.dodt)
-
-    def dodt_config(self, cfg):
-        if not self.dodt:
-            return cfg
-        from dodt.config import override
-
-        try:
-            return override(cfg, self.dodt_assignments())
-        except ValueError as e:
-            msg = str(e)
-            raise ConfigError("dodt." + (msg[len("--set "):] if msg.startswith("--set ") else msg)) from None
-
-    def record(self, sections: dict[str, Any]) -> dict:
-        """The ``config`` entry of a summary: ``set`` (every override) and, for each overridden section, its
-        full values from ``sections`` (section -> the dataclass it ended as, or a note when not used)."""
+    def record(self, used: Mapping[str, Any]) -> dict:
+        """The ``config`` entry of a summary: ``set`` (every override) and the full values of every section
+        in ``used`` (section -> the dataclass it ended as), whether overridden or not."""
         out: dict[str, Any] = {"set": self.assignments()}
-        for s in SECTIONS:
-            if getattr(self, s) and s in sections:
-                v = sections[s]
-                out[s] = _jsonable(dataclasses.asdict(v)) if dataclasses.is_dataclass(v) else v
+        for name, v in used.items():
+            out[name] = _jsonable(dataclasses.asdict(v)) if dataclasses.is_dataclass(v) else _jsonable(v)
         return out
 
 
@@ -131,17 +80,6 @@ def _jsonable(v):
     if isinstance(v, (list, tuple)):
         return [_jsonable(x) for x in v]
     return v
-
-
-def _override_text(v) -> str:
-    """A value in dodt.config.override's syntax."""
-    if v is None:
-        return "none"
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (list, tuple)):
-        return ",".join(_override_text(x) for x in v)
-    return str(v) if not isinstance(v, float) else repr(v)
 
 
 # ---------------------------------------------------------------- typed values
@@ -181,6 +119,8 @@ def _coerce(value, hint, key: str):
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{key}: expected a number, got {value!r}")
+        if not math.isfinite(float(value)):
+            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
         return float(value)
     if hint is str:
         if not isinstance(value, str):
@@ -189,7 +129,7 @@ def _coerce(value, hint, key: str):
     return value
 
 
-def _apply(cfg, items, section: str):
+def _apply(cfg, items, section: str, check: Check | None = None):
     """``cfg`` (a dataclass) with (dotted path, value) items applied through nested dataclasses. Each
     dataclass is replaced once, with all of its changes, so that values it checks against each other (a
     minimum and a maximum) can be set in any order."""
@@ -205,7 +145,7 @@ def _apply(cfg, items, section: str):
         if isinstance(node.get(last), dict):
             raise ConfigError(f"{key}: {_keys(node[last])[0]} is set too; a key is a value or a section, not both")
         node[last] = (key, value)
-    return _replace(cfg, tree)
+    return _replace(cfg, tree, check)
 
 
 def _keys(tree: dict) -> list[str]:
@@ -213,7 +153,7 @@ def _keys(tree: dict) -> list[str]:
     return [k for sub in tree.values() for k in (_keys(sub) if isinstance(sub, dict) else [sub[0]])]
 
 
-def _replace(obj, tree: dict):
+def _replace(obj, tree: dict, check: Check | None):
     fields = {f.name for f in dataclasses.fields(obj)}
     changes = {}
     for name, sub in tree.items():
@@ -225,12 +165,19 @@ def _replace(obj, tree: dict):
         if isinstance(sub, dict):
             if not dataclasses.is_dataclass(current):
                 raise ConfigError(f"{key}: unknown key; {type(obj).__name__}.{name} is a value, not a section")
-            changes[name] = _replace(current, sub)
+            changes[name] = _replace(current, sub, check)
         else:
             if dataclasses.is_dataclass(current):
                 fields_of = ", ".join(f.name for f in dataclasses.fields(current))
                 raise ConfigError(f"{key}: is a section; set its fields ({fields_of})")
-            changes[name] = _coerce(sub[1], typing.get_type_hints(type(obj))[name], key)
+            value = _coerce(sub[1], typing.get_type_hints(type(obj))[name], key)
+            _field_range(obj, name, key, value)
+            if check is not None:
+                try:
+                    check(key, value)
+                except ValueError as e:
+                    raise ConfigError(str(e)) from None
+            changes[name] = value
     try:
         return dataclasses.replace(obj, **changes)
     except (ValueError, TypeError) as e:
@@ -258,21 +205,56 @@ def _flatten(table: dict, prefix: str = "") -> list[tuple[str, Any]]:
     return out
 
 
+def _field_range(obj, name: str, key: str, value) -> None:
+    """A plug-in's own range: ``field(metadata={"range": (lo, hi)})`` bounds a number (or each number of a
+    list) to [lo, hi]."""
+    rng = next(f for f in dataclasses.fields(obj) if f.name == name).metadata.get("range")
+    if rng is None or value is None:
+        return
+    lo, hi = rng
+    for v in (value if isinstance(value, tuple) else (value,)):
+        if isinstance(v, (int, float)) and not lo <= v <= hi:
+            raise ConfigError(f"{key}: {v!r} is outside [{lo:g}, {hi:g}]")
+
+
+def _depth(v, limit: int, depth: int = 0) -> int:
+    """How deep tables and lists nest in ``v``, counting no further than ``limit`` + 1."""
+    if depth > limit:
+        return depth
+    children = v.values() if isinstance(v, dict) else v if isinstance(v, list) else ()
+    return max((_depth(c, limit, depth + 1) for c in children), default=depth)
+
+
 def read_file(path: str | Path) -> list[tuple[str, Any]]:
-    """The (dotted key, value) pairs of a TOML configuration file."""
+    """The (dotted key, value) pairs of a TOML configuration file (at most MAX_CONFIG_BYTES, UTF-8, tables
+    at most MAX_KEY_DEPTH deep); a ConfigError naming the file when it cannot be used."""
     p = Path(path)
     try:
+        if not p.exists():
+            raise ConfigError(f"--config: no such file {str(path)!r}")
+        if p.is_dir():
+            raise ConfigError(f"--config: {path} is a folder, not a TOML file")
+        if not p.is_file():
+            raise ConfigError(f"--config: {path} is not a regular file")
         with open(p, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"--config: no such file {str(path)!r}") from None
-    except IsADirectoryError:
-        raise ConfigError(f"--config: {path} is a folder, not a TOML file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"--config: {path}: not valid TOML ({e})") from None
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
     except OSError as e:
         raise ConfigError(f"--config: cannot read {path}: {e.strerror or e}") from None
-    return [(k, v) for k, v in _flatten(data)]
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"--config: {path}: larger than {MAX_CONFIG_BYTES >> 20} MiB; not a configuration file")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"--config: {path}: not UTF-8 text (byte {e.start})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"--config: {path}: not valid TOML ({e})") from None
+    except RecursionError:
+        raise ConfigError(f"--config: {path}: nested too deep") from None
+    if _depth(data, MAX_KEY_DEPTH) > MAX_KEY_DEPTH:
+        raise ConfigError(f"--config: {path}: tables or lists nested more than {MAX_KEY_DEPTH} deep")
+    return _flatten(data)
 
 
 def parse_set(text: str) -> tuple[str, Any]:
@@ -283,47 +265,32 @@ def parse_set(text: str) -> tuple[str, Any]:
     return key, parse_value(raw)
 
 
-def build(config_file: str | Path | None = None, sets: typing.Iterable[str] = ()) -> Settings:
+def build(sections: Mapping[str, Any], config_file: str | Path | None = None, sets: typing.Iterable[str] = (),
+          check: Check | None = None) -> Settings:
     """Settings from a TOML file and ``--set`` assignments (after the file, in order), each key and value
-    checked against its section's dataclass now (ConfigError naming the key when wrong)."""
-    pairs = read_file(config_file) if config_file else []
-    pairs += [parse_set(s) for s in sets]
-    by_section: dict[str, dict[str, Any]] = {s: {} for s in SECTIONS}
-    for key, value in pairs:
+    checked now against its section's default configuration in ``sections`` (name -> dataclass instance)
+    and by ``check``: a ConfigError naming the key (and the file, for a key the file set)."""
+    pairs = [(k, v, config_file) for k, v in read_file(config_file)] if config_file else []
+    pairs += [(*parse_set(s), None) for s in sets]
+    by_section: dict[str, dict[str, Any]] = {s: {} for s in sections}
+    origin: dict[str, Any] = {}
+    for key, value, where in pairs:
         section, _, rest = key.partition(".")
+        prefix = f"{where}: " if where else ""
         if section not in by_section:
-            raise ConfigError(f"{key}: unknown section {section!r}; sections: {', '.join(SECTIONS)}")
-        if not rest:
-            raise ConfigError(f"{key}: expected {section}.<field>")
+            raise ConfigError(f"{prefix}{key}: unknown section {section!r}; sections: {', '.join(sections)}")
+        if not rest or rest.count(".") >= MAX_KEY_DEPTH:
+            raise ConfigError(f"{prefix}{key}: expected {section}.<field>")
         d = by_section[section]
         d.pop(rest, None)  # the last value wins, in the order of its last assignment
         d[rest] = tuple(value) if isinstance(value, list) else value
-    settings = Settings(**{s: tuple(d.items()) for s, d in by_section.items()})
-    check(settings)
+        origin[key] = where
+    settings = Settings(tuple((s, tuple(d.items())) for s, d in by_section.items() if d))
+    for name in settings.names():
+        try:
+            settings.apply(name, sections[name], check)
+        except ConfigError as e:
+            key = str(e).split(":", 1)[0]
+            where = origin.get(key)
+            raise ConfigError(f"{where}: {e}" if where else str(e)) from None
     return settings
-
-
-def check(settings: Settings) -> None:
-    """Apply every section to its default configuration: an unknown key or a bad value raises now."""
-    if not settings:
-        return
-    classes = _section_classes()
-    from dodt.presets import preset
-
-    settings.episode_config(classes["episode"]())
-    settings.shield_config(classes["shield"]())
-    settings.navigator_config(classes["navigator"]())
-    settings.map_config(classes["map"]())
-    settings.dodt_config(preset("dodt"))
-    settings.moving_rule_config(classes["moving_rule"]())
-    settings.oracle_config(classes["oracle"]())
-    if settings.episode:
-        from experiments.episode import STATIC_MAPS
-
-        e = settings.episode_config(classes["episode"]())
-        if e.static_map not in STATIC_MAPS:
-            raise ConfigError(f"episode.static_map: {e.static_map!r} is not one of {', '.join(STATIC_MAPS)}")
-        if e.duration is not None and not 0 < e.duration <= 3600:
-            raise ConfigError(f"episode.duration: expected seconds > 0 and <= 3600, got {e.duration!r}")
-        if e.frame_latency < 0 or e.map_every < 1 or not e.plan_rate > 0:
-            raise ConfigError("episode: frame_latency must be >= 0, map_every >= 1 and plan_rate > 0")

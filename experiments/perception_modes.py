@@ -32,22 +32,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from dodt.config import DODTConfig
+from dodt.context import EpisodeContext
 from dodt.frames import SensorFrame
 from dodt.geometry import half_view, wrap_angle
 from dodt.pipeline import DODT
-from dodt.presets import PRESETS, preset
-from dodt.protocol import PerceptionModule, PerceptionOutput  # also importable from here, as before
+from dodt.presets import preset
+from dodt.protocol import PerceptionModule, PerceptionOutput, TrackReport  # also importable from here
 from planner.types import ObstaclePrediction
 
 MODES = ("dodt", "oracle", "oracle-360", "oracle-noisy", "static-only")
 # m/s per axis (correlation time 0.5 s): the oracle-noisy mode's velocity error, the size of a tracker's
 # velocity error on walkers near the drone (a larger median than DODT's, a like tail)
 NOISY_ORACLE_VELOCITY_NOISE = 0.3
-
-
-def known_modes() -> tuple[str, ...]:
-    """Every name make_perception accepts: the modes and the DODT presets, once each."""
-    return tuple(dict.fromkeys(MODES + tuple(PRESETS)))
 
 
 def horizontal_view(T_world_camera: np.ndarray, K) -> tuple[np.ndarray, float, float]:
@@ -131,8 +127,8 @@ class DODTPerception:
         # config: DODT's configuration (default: the preset of that name), e.g. with --set dodt.* applied
         self.dodt = DODT(preset(config_name) if config is None else config, learned_detector=learned_detector)
         self.moving_rule = moving_rule
-        # the closed loop may set this to VoxelMap.established_fraction: a track the rule would pass is
-        # then checked against the static map (MovingTrackRule.on_structure)
+        # the static map's established_fraction when the episode context has a map: a track the rule
+        # would pass is then checked against the static map (MovingTrackRule.on_structure)
         self.structure_test = None
         self._on_structure: set[int] = set()
         # tracks passed to the planner, labelled dynamic or by the rule: passed again however slow they become
@@ -143,8 +139,10 @@ class DODTPerception:
         """Only the learned person detector looks at colour; DODT without it reads depth alone."""
         return self.dodt.learned_detector is not None
 
-    def reset(self) -> None:
+    def reset(self, context: EpisodeContext | None = None) -> None:
         self.dodt.reset()
+        smap = None if context is None else context.static_map
+        self.structure_test = None if smap is None else smap.established_fraction
         self._on_structure = set()
         self._passed = set()
 
@@ -214,7 +212,8 @@ class DODTPerception:
             if o.dynamic and (not o.is_person or float(np.hypot(o.velocity[0], o.velocity[1])) >= PERSON_CLEAR_SPEED):
                 boxes.append((o.center, o.size))
         return PerceptionOutput(stamp=r.stamp, obstacles=tuple(preds), clear_boxes=tuple(boxes),
-                                tracks=[o.to_json() for o in r.obstacles], timings_ms=dict(r.timings_ms),
+                                tracks=tuple(TrackReport.from_tracked(o) for o in r.obstacles),
+                                timings_ms=dict(r.timings_ms),
                                 skipped=r.skipped)
 
 
@@ -268,7 +267,7 @@ class OraclePerception:
         self.name = name or ("oracle-360" if all_around else "oracle")
         self.reset()
 
-    def reset(self) -> None:
+    def reset(self, context: EpisodeContext | None = None) -> None:
         self._last_seen: dict[int, float] = {}
         self._first_seen: dict[int, float] = {}  # id -> when it came into view after being lost
         self._velocities: dict[int, deque] = {}  # id -> (stamp, true velocity) over accel_window
@@ -322,11 +321,10 @@ class OraclePerception:
             preds.append(ObstaclePrediction(id=o.id, center=o.center.copy(), size=o.size.copy(),
                                             velocity=vel, acceleration=acc))
             boxes.append((o.center.copy(), o.size.copy()))
-            tracks.append({"id": o.id, "center": [round(float(x), 4) for x in o.center],
-                           "size": [round(float(x), 4) for x in o.size],
-                           "velocity": [round(float(x), 4) for x in vel], "dynamic": True,
-                           "coasting": truth.stamp > seen})
-        return PerceptionOutput(stamp=truth.stamp, obstacles=tuple(preds), clear_boxes=tuple(boxes), tracks=tracks)
+            tracks.append(TrackReport(id=o.id, center=o.center.copy(), size=o.size.copy(), velocity=vel, dynamic=True,
+                                      coasting=truth.stamp > seen))
+        return PerceptionOutput(stamp=truth.stamp, obstacles=tuple(preds), clear_boxes=tuple(boxes),
+                                tracks=tuple(tracks))
 
 
 class StaticOnlyPerception:
@@ -335,46 +333,8 @@ class StaticOnlyPerception:
     uses_images = False  # the map looks at the depth, not this module
     uses_color = False
 
-    def reset(self) -> None:
+    def reset(self, context: EpisodeContext | None = None) -> None:
         pass
 
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
         return PerceptionOutput(stamp=frame.stamp, obstacles=())
-
-
-def make_perception(mode: str, learned_detector=None, settings=None) -> PerceptionModule:
-    """A perception module by name: dodt (or any DODT preset), oracle, static-only, or a plug-in's
-    ``module:Class`` (experiments.plugins). settings: configuration overrides (experiments.config.Settings),
-    each section on top of the mode's own configuration: ``dodt`` (DODT's, the preset's) and ``moving_rule``
-    for the DODT modes, ``oracle`` for the oracle modes; static-only and plug-ins read none."""
-    from experiments.config import Settings
-    from experiments.plugins import is_spec, make_perception_plugin
-
-    if is_spec(mode):
-        return make_perception_plugin(mode)
-    settings = Settings() if settings is None else settings
-    if mode in ("oracle", "oracle-360", "oracle-noisy"):
-        own = OracleConfig(velocity_noise=NOISY_ORACLE_VELOCITY_NOISE) if mode == "oracle-noisy" else OracleConfig()
-        return OraclePerception(settings.oracle_config(own), all_around=mode == "oracle-360", name=mode)
-    if mode == "static-only":
-        return StaticOnlyPerception()
-    if mode in PRESETS:
-        return DODTPerception(mode, learned_detector=learned_detector,
-                              moving_rule=settings.moving_rule_config(MovingTrackRule()),
-                              config=settings.dodt_config(preset(mode)))
-    raise ValueError(f"unknown perception mode {mode!r}; known: {', '.join(known_modes())}")
-
-
-def config_sections(perception) -> dict:
-    """The configuration a perception module runs with, by section of experiments.config (what a summary
-    records of an overridden section): ``dodt`` for a module holding a DODT, ``moving_rule`` for the DODT
-    modes, ``oracle`` for the oracle modes."""
-    out = {}
-    dodt = getattr(perception, "dodt", None)
-    if isinstance(getattr(dodt, "cfg", None), DODTConfig):
-        out["dodt"] = dodt.cfg
-    if isinstance(perception, DODTPerception):
-        out["moving_rule"] = perception.moving_rule
-    if isinstance(perception, OraclePerception):
-        out["oracle"] = perception.cfg
-    return out

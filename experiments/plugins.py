@@ -1,35 +1,23 @@
-"""Your own planner or perception module in every command: ``--planner module:Class`` and
-``--perception module:Class``.
+"""Loading your own classes: ``--planner module:Class`` and ``--perception module:Class``.
 
 ``module`` is an importable dotted module (``mypackage.planners``) or the path of a Python file
-(``examples/custom_planner.py``, relative to the working directory). The class is instantiated with no
-arguments, once per episode, in the process that runs the episode (a sweep's workers receive the spec
-string and load the class themselves).
+(``examples/custom_planner.py``, relative to the working directory). The class is built once per episode,
+in the process that runs the episode (a sweep's workers receive the spec string and load the class
+themselves): with no arguments, or, when it declares a configuration dataclass as ``config_class``, with
+that configuration (its defaults with the ``[planner]`` / ``[perception]`` overrides applied).
 
-- A planner implements ``planner.types.Planner``: ``reset()`` and ``plan(PlannerInput) -> Trajectory``.
-  The built-in name ``default`` is the maneuver + MPC planner behind the passive-safety shield
-  (experiments.episode.default_planner).
-- A perception module implements ``dodt.protocol.PerceptionModule``: ``reset()`` and
-  ``update(frame, truth=None) -> PerceptionOutput``; optional attributes ``uses_ground_truth`` (default
-  False: ``truth`` is None), ``uses_images`` and ``uses_color`` (default True). Built-in names: the
-  perception modes and DODT presets (experiments.perception_modes.known_modes).
-
-Results record the spec as given: ``planner`` and ``perception`` of each summary are the spec string
-for a plug-in (the class name ``PassiveSafetyShield`` and the mode name for the built-ins).
+What the classes implement: ``planner.types.Planner`` and ``dodt.protocol.PerceptionModule``
+(docs/interfaces.md). Which names are built in, and how a spec becomes a component:
+experiments.registry.
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import importlib.util
 import sys
 import zlib
 from pathlib import Path
-
-DEFAULT_PLANNER = "default"
-DEFAULT_PLANNER_LABEL = "PassiveSafetyShield"  # what summaries have always recorded for the default planner
-PLANNER_METHODS = ("reset", "plan")
-PERCEPTION_METHODS = ("reset", "update")
-
 
 class PluginError(ValueError):
     """A spec that does not name a usable class; the message has no option name (the CLI adds it)."""
@@ -84,48 +72,36 @@ def load_class(spec: str) -> type:
     return obj
 
 
-def _instantiate(spec: str, methods: tuple[str, ...], protocol: str, where: str):
+def config_class(spec: str) -> type | None:
+    """The configuration dataclass a plug-in class declares as ``config_class``, or None."""
     cls = load_class(spec)
+    own = getattr(cls, "config_class", None)
+    if own is None:
+        return None
+    if not (isinstance(own, type) and dataclasses.is_dataclass(own)):
+        raise PluginError(f"{spec}: its config_class must be a dataclass, not {own!r}")
     try:
-        obj = cls()
+        own()
+    except Exception as e:  # noqa: BLE001 - the user's class
+        raise PluginError(f"{spec}: {own.__name__}() (its defaults) failed: {type(e).__name__}: {e}") from None
+    return own
+
+
+def load_plugin(spec: str, methods: tuple[str, ...], protocol: str, where: str, config=None):
+    """An instance of the class ``spec`` names, built as ``Class(config)`` when it declares a
+    ``config_class`` (``config`` None: its defaults) and as ``Class()`` otherwise; PluginError when it
+    cannot be built or lacks one of ``methods``."""
+    cls = load_class(spec)
+    own = config_class(spec)
+    if own is not None and config is None:
+        config = own()
+    try:
+        obj = cls() if own is None else cls(config)
     except Exception as e:  # noqa: BLE001
-        raise PluginError(f"{spec}: {cls.__name__}() (no arguments) failed: {type(e).__name__}: {e}") from None
+        how = "() (no arguments)" if own is None else f"({own.__name__})"
+        raise PluginError(f"{spec}: {cls.__name__}{how} failed: {type(e).__name__}: {e}") from None
     missing = [m for m in methods if not callable(getattr(obj, m, None))]
     if missing:
         raise PluginError(f"{spec}: {cls.__name__} does not implement the {protocol} protocol ({where}): no "
                           + " or ".join(f"{m}()" for m in missing) + " method")
     return obj
-
-
-def make_planner(spec: str | None):
-    """A planner instance for a spec; None for the built-in default (built per episode, sized for the drone)."""
-    if spec is None or spec == DEFAULT_PLANNER:
-        return None
-    if not is_spec(spec):
-        raise PluginError(f"unknown planner {spec!r}; built-in: {DEFAULT_PLANNER}; or module:Class")
-    return _instantiate(spec, PLANNER_METHODS, "planner", "planner.types.Planner")
-
-
-def planner_label(spec: str | None) -> str:
-    """What a summary records as ``planner`` for a spec."""
-    return DEFAULT_PLANNER_LABEL if spec is None or spec == DEFAULT_PLANNER else spec
-
-
-def make_perception_plugin(spec: str):
-    """A perception module instance for a ``module:Class`` spec."""
-    return _instantiate(spec, PERCEPTION_METHODS, "perception", "dodt.protocol.PerceptionModule")
-
-
-def check_planner(spec: str | None) -> None:
-    """Raises PluginError when the spec does not give a planner (the class is loaded and instantiated once)."""
-    make_planner(spec)
-
-
-def check_perception(spec: str) -> None:
-    """Raises PluginError when the spec is neither a built-in mode nor a usable plug-in."""
-    from experiments.perception_modes import known_modes
-
-    if is_spec(spec):
-        make_perception_plugin(spec)
-    elif spec not in known_modes():
-        raise PluginError(f"unknown mode {spec!r}; known: {', '.join(known_modes())}; or module:Class")

@@ -24,9 +24,10 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from experiments.environment import distinct
+from sim import load_scenario
 from experiments.config import Settings
 from experiments.episode import EpisodeConfig, run_episode
-from experiments.plugins import DEFAULT_PLANNER_LABEL, planner_label
+from experiments.registry import DEFAULT_PLANNER_LABEL, configured, planner_label
 
 RESULTS = "results.jsonl"
 SEED_MAX = 2**63 - 1  # what a scenario file's seed (a TOML integer) holds
@@ -74,12 +75,14 @@ def wilson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
 
 
 def run_one(scenario, seed: int, perception: str, episodes_dir: str, keep_log: bool,
-            cfg: EpisodeConfig = EpisodeConfig(), settings: Settings | None = None, planner: str | None = None) -> dict:
+            cfg: EpisodeConfig = EpisodeConfig(), settings: Settings | None = None, planner: str | None = None,
+            shield: bool = False) -> dict:
     """One episode in a worker (module-level so process pools and Dask can ship it). perception and planner
-    are names or ``module:Class`` specs, resolved here (experiments.plugins); settings: the overrides
-    (experiments.config)."""
+    are names or ``module:Class`` specs, resolved here (experiments.registry); settings: the overrides
+    (experiments.config); shield: a plug-in planner behind the passive-safety shield."""
     out = Path(episodes_dir) / f"seed_{seed:04d}"
-    s = run_episode(scenario, seed=seed, perception=perception, planner=planner, out=out, cfg=cfg, settings=settings)
+    s = run_episode(scenario, seed=seed, perception=perception, planner=planner, out=out, cfg=cfg, settings=settings,
+                    shield=shield)
     if s["success"] and not keep_log:
         shutil.rmtree(out, ignore_errors=True)
     return s
@@ -141,7 +144,7 @@ class _Progress:
 def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs: int = 1,
               dask_address: str | None = None, keep_logs: bool = False, progress: bool = True,
               cfg: EpisodeConfig = EpisodeConfig(), settings: Settings | None = None,
-              planner: str | None = None) -> dict:
+              planner: str | None = None, shield: bool = False) -> dict:
     """Run the seeds not yet in ``out/results.jsonl``; return the aggregate over all requested seeds.
     cfg: every episode's settings (experiments.episode.EpisodeConfig); a folder holds results of one
     static map and one frame latency only. Episodes render in a second process only when they run one
@@ -149,7 +152,7 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
     settings: configuration overrides (experiments.config); planner: a ``module:Class`` spec or None for the
     default (experiments.plugins). A folder holds results of one planner and one set of overrides only."""
     settings = settings or Settings()
-    cfg = settings.episode_config(cfg)
+    cfg = configured(settings, "episode", cfg)
     if jobs > 1 or dask_address:
         cfg = replace(cfg, render_process=False)
     out = Path(out)
@@ -167,8 +170,7 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
         if clash:
             raise SweepError(f"{res_path}: holds results with the {what} {clash[0].get(key, old_default)!r}, not "
                              f"{want!r}; use another --out folder")
-    check_same_setup(res_path, done.values(), settings, planner)
-    from sim import load_scenario
+    check_same_setup(res_path, done.values(), settings, planner_label(planner, shield))
 
     name = load_scenario(scenario).name
     other = [s for s in done.values() if s.get("scenario") != name]
@@ -186,21 +188,23 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
         if bar:
             bar.tick(s)
 
-    run_tasks([(None, (scenario, seed, perception, episodes_dir, keep_logs, cfg, settings, planner)) for seed in todo],
+    run_tasks([(None, (scenario, seed, perception, episodes_dir, keep_logs, cfg, settings, planner, shield))
+               for seed in todo],
               jobs, dask_address, lambda _key, s: finished(s))
     if bar:
         bar.close()
-    agg = aggregate([done[s] for s in seeds], name, perception, planner=planner_label(planner), settings=settings)
+    agg = aggregate([done[s] for s in seeds], name, perception, planner=planner_label(planner, shield),
+                    settings=settings)
     agg["wall_s_this_run"] = round(time.perf_counter() - t0, 1)
     (out / "summary.json").write_text(json.dumps(agg, indent=1))
     (out / "summary.md").write_text(markdown(agg))
     return agg
 
 
-def check_same_setup(res_path: Path, done, settings: Settings, planner: str | None) -> None:
-    """Refuse a results file of another planner or other configuration overrides (a row without the
-    entries: the default planner, no overrides)."""
-    want_planner, want_set = planner_label(planner), settings.assignments()
+def check_same_setup(res_path: Path, done, settings: Settings, want_planner: str) -> None:
+    """Refuse a results file of another planner (``want_planner``: its label) or other configuration
+    overrides (a row without the entries: the default planner, no overrides)."""
+    want_set = settings.assignments()
     for s in done:
         if s.get("planner", DEFAULT_PLANNER_LABEL) != want_planner:
             raise SweepError(f"{res_path}: holds results of planner {s.get('planner')!r}, not {want_planner!r}; "
@@ -346,6 +350,9 @@ def aggregate(summaries: list[dict], scenario: str, perception: str, planner: st
         "min_clearance_person": _dist(s["min_clearance"]["person"] for s in summaries),
         "min_clearance_overall": _dist(s["min_clearance"]["overall"] for s in summaries),
         "planner_fallbacks": int(sum(s["planner_stats"]["fallbacks"] for s in summaries)),
+        # episodes in which the planner or perception raised or returned malformed output (experiments.guards)
+        "module_errors": [{"seed": s["seed"], **{m: e["count"] for m, e in s["module_errors"].items()}}
+                          for s in sorted(summaries, key=lambda s: s["seed"]) if s.get("module_errors")],
         # the environments the episodes ran in (one, unless a sweep was resumed elsewhere)
         "environments": distinct(s.get("environment") for s in summaries),
         "per_seed": [{"seed": s["seed"], "success": s["success"], "collided": s["collided"],
@@ -378,6 +385,10 @@ def markdown(agg: dict) -> str:
         for k, v in speeds.items():
             L.append(f"| {k} | {len(v)} | {', '.join(f'{x:.2f}' for x in v)} |")
     L += ["", f"Planner fallbacks over all episodes: {agg['planner_fallbacks']}", ""]
+    errs = agg.get("module_errors") or []
+    if errs:
+        L += [f"Episodes with planner or perception errors: {len(errs)} (seeds "
+              + ", ".join(str(e["seed"]) for e in errs) + "; each episode's errors.txt has the first traceback)", ""]
     envs = agg.get("environments", [])
     if envs:
         L += [("Environment: " if len(envs) == 1 else f"Environments ({len(envs)}, outcomes may differ between them): ")

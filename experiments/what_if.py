@@ -34,6 +34,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from dodt.context import EpisodeContext
 from dodt.protocol import PerceptionOutput
 from experiments.perception_modes import DODTPerception, horizontal_view, oracle_view
 from planner.types import ObstaclePrediction
@@ -74,16 +75,8 @@ class _DODTWithTruth:
     def name(self) -> str:
         return f"dodt+{type(self).__name__}"
 
-    @property
-    def structure_test(self):  # the closed loop sets the map's test on DODT's moving-track rule
-        return self.dodt.structure_test
-
-    @structure_test.setter
-    def structure_test(self, test) -> None:
-        self.dodt.structure_test = test
-
-    def reset(self) -> None:
-        self.dodt.reset()
+    def reset(self, context: EpisodeContext | None = None) -> None:
+        self.dodt.reset(context)  # DODT's moving-track rule reads the context's static map
         self._last_in_view: dict[int, float] = {}
 
     def update(self, frame, truth=None) -> PerceptionOutput:
@@ -139,8 +132,8 @@ class VisibleCompleted(_DODTWithTruth):
     body = 0.25  # m: the near side's points lie this far in front of the centre, and this far to each side
     range_limit = 5.5  # m from the camera to the person's centre
 
-    def reset(self) -> None:
-        super().reset()
+    def reset(self, context: EpisodeContext | None = None) -> None:
+        super().reset(context)
         self._depth = (None, None)  # (frame, its depth in metres): converted once per frame, when needed
 
     def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:

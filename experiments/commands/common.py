@@ -111,7 +111,8 @@ def output_folder(path: str, option: str = "--out") -> Path:
 
 def check_perception(mode: str) -> None:
     """A built-in mode or a plug-in's module:Class that loads and implements the protocol."""
-    from experiments.plugins import PluginError, check_perception as check
+    from experiments.plugins import PluginError
+    from experiments.registry import check_perception as check
 
     try:
         check(mode)
@@ -121,7 +122,8 @@ def check_perception(mode: str) -> None:
 
 def check_planner(spec: str) -> str | None:
     """The --planner spec for the episodes: None for the built-in default."""
-    from experiments.plugins import DEFAULT_PLANNER, PluginError, check_planner as check
+    from experiments.plugins import PluginError
+    from experiments.registry import DEFAULT_PLANNER, check_planner as check
 
     try:
         check(spec)
@@ -130,13 +132,20 @@ def check_planner(spec: str) -> str | None:
     return None if spec == DEFAULT_PLANNER else spec
 
 
-def settings(args):
-    """The overrides of --config and --set (experiments.config), checked now."""
-    from experiments.config import ConfigError, build
+def settings(args, perceptions=None):
+    """The overrides of --config and --set (experiments.config), checked now against the sections of the
+    built-in components and of the plug-ins named by --planner and ``perceptions`` (default --perception)."""
+    from experiments.config import ConfigError
+    from experiments.plugins import PluginError
+    from experiments.registry import settings_for
 
+    specs = perceptions if perceptions is not None else [getattr(args, "perception", "dodt")]
     try:
-        return build(args.config, args.set or ())
-    except ConfigError as e:
+        out = None
+        for spec in specs or ["dodt"]:
+            out = settings_for(args.config, args.set or (), perception=spec, planner=args.planner)
+        return out
+    except (ConfigError, PluginError) as e:
         raise UserError(str(e)) from None
 
 
@@ -148,9 +157,10 @@ EPISODE_OPTIONS = {"static_map": "--map", "frame_latency": "--frame-latency", "r
 def episode_config(args, settings, **given):
     """The episodes' EpisodeConfig: the episode options (and ``given``, values a command decided), then the
     settings' episode section; an option given on the command line and also set as a key is refused."""
-    from experiments.episode import EpisodeConfig
+    from experiments.episode_config import EpisodeConfig
+    from experiments.registry import configured
 
-    keys = {k for k, _ in settings.episode}
+    keys = {k for k, _ in settings.section("episode")}
     values = {}
     for field, option in EPISODE_OPTIONS.items():
         v = given.get(field, getattr(args, option[2:].replace("-", "_"), None))
@@ -159,7 +169,10 @@ def episode_config(args, settings, **given):
         if field in keys:
             raise UserError(f"{option} and episode.{field} (--config/--set) both given; use one")
         values[field] = v
-    return settings.episode_config(EpisodeConfig(**values))
+    try:
+        return configured(settings, "episode", EpisodeConfig(**values))
+    except ValueError as e:
+        raise UserError(str(e)) from None
 
 
 # --------------------------------------------------------------------------- shared options
@@ -192,9 +205,12 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--planner", default="default", metavar="NAME|module:Class",
                         help="default (the MPC planner behind the passive-safety shield) or your own planner class: "
                              "module:Class with module a dotted module or a .py file; built with no arguments")
+    parser.add_argument("--shield", action="store_true",
+                        help="fly a plug-in --planner behind the passive-safety shield (the default planner is)")
     parser.add_argument("--config", default=None, metavar="FILE.toml",
                         help="configuration overrides: TOML tables episode, shield, navigator (navigator.mpc, "
-                             "navigator.maneuvers), map, dodt, moving_rule, oracle (experiments.config)")
+                             "navigator.maneuvers), map, dodt, moving_rule, oracle, and planner / perception for a "
+                             "plug-in with a config_class (experiments.registry)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="one override, the value a TOML literal (e.g. shield.a_brake=3.0, "
                              "navigator.mpc.horizon=30); repeatable, applied after --config")
@@ -245,7 +261,7 @@ def builtin_names() -> str:
     """Epilog blocks naming the built-in perception modes, the DODT presets and the built-in planner."""
     from dodt.presets import PRESETS
     from experiments.perception_modes import MODES
-    from experiments.plugins import DEFAULT_PLANNER, DEFAULT_PLANNER_LABEL
+    from experiments.registry import DEFAULT_PLANNER, DEFAULT_PLANNER_LABEL
 
     return "\n\n".join([
         name_list("perception modes (--perception)", MODES),

@@ -113,7 +113,7 @@ def cmd_run(args) -> int:
         viewer = LiveViewer(corridor=sc.corridor, goal=sc.drone.goal)
     try:
         s = run_episode(sc, seed=args.seed, perception=args.perception, planner=planner, out=out, cfg=cfg,
-                        on_frame=viewer, settings=config)
+                        on_frame=viewer, settings=config, shield=args.shield)
         if viewer is not None and not args.no_wait and sys.stdin.isatty():
             input("episode finished; press Enter to stop the meshcat viewer ")
     finally:
@@ -129,8 +129,12 @@ def cmd_run(args) -> int:
     print("min clearance [m]: " + ", ".join(f"{k} {v:.2f}" for k, v in mc.items() if v is not None))
     print(f"planner solve median {tm['planner_solve_ms'].get('median', '-')} ms, p99 {tm['planner_solve_ms'].get('p99', '-')} ms, "
           f"fallbacks {s['planner_stats']['fallbacks']}; perception median {tm['perception_ms'].get('median', '-')} ms; "
-          f"{s['sim_time']:.1f} s simulated in {tm['wall_s']:.1f} s ({tm['real_time_factor']}x real time)")
+          f"{s['sim_time']:.1f} s simulated in {tm['loop_s']:.1f} s ({tm['real_time_factor']}x real time; "
+          f"start-up {tm['startup_s']:.1f} s and numba compilation {tm['compile_s']:.1f} s apart)")
     print(f"wrote {args.out}/summary.json and {args.out}/log.jsonl.gz")
+    for module, e in (s.get("module_errors") or {}).items():
+        print(f"error: the {module} failed {e['count']} times (first at t = {e['first_time']:.2f} s); the first "
+              f"traceback is in {args.out}/errors.txt", file=sys.stderr)
     if args.viz == "html":
         from experiments.viz import build_replay_html
 
@@ -141,4 +145,4 @@ def cmd_run(args) -> int:
 
         files = plot_episode(out / "log.jsonl.gz", out)
         print("wrote " + ", ".join(str(f) for f in files))
-    return 0
+    return 1 if s.get("module_errors") else 0

@@ -141,7 +141,7 @@ def cmd_sweep(args) -> int:
         seeds = sweep.parse_seeds(args.seeds)
         agg = sweep.run_sweep(args.scenario, seeds, args.perception, Path(args.out), jobs=args.jobs,
                               dask_address=args.dask, keep_logs=args.keep_logs, progress=not args.quiet, cfg=cfg,
-                              settings=config, planner=planner)
+                              settings=config, planner=planner, shield=args.shield)
     except sweep.SweepError as e:
         raise UserError(str(e)) from None
     r = agg["rates"]
@@ -159,6 +159,12 @@ def cmd_sweep(args) -> int:
         Path(args.junit).write_text(sweep.junit(agg, by_seed))
         print(f"wrote {args.junit}")
     status = 0
+    errs = agg.get("module_errors") or []
+    if errs:
+        print(f"error: the planner or perception failed in {len(errs)} episodes (seeds "
+              + ", ".join(str(e["seed"]) for e in errs) + f"); see {args.out}/episodes/seed_NNNN/errors.txt",
+              file=sys.stderr)
+        status = 1
     for key, limit in (("collision", args.max_collision_rate), ("at_fault", args.max_at_fault_rate)):
         if limit is not None and r[key]["rate"] > limit:
             what = "at-fault collision" if key == "at_fault" else "collision"
@@ -191,19 +197,19 @@ def cmd_benchmark(args) -> int:
         check_perception(m)
     people = names(args.people, tuple(benchmark.PEOPLE), "people")
     planner = check_planner(args.planner)
-    config = settings(args)
+    config = settings(args, modes)
     count, given = args.seeds, {}
     if args.quick:  # a smoke-sized run: two families, the oracle on the known map (unless given), two seeds
         families = families if args.families else ("corridor", "head_on")
         modes = modes if args.perception else ("oracle",)
         count = min(count, 2)
-        if args.map is None and "static_map" not in dict(config.episode):
+        if args.map is None and "static_map" not in dict(config.section("episode")):
             given["static_map"] = "truth"
     cfg = episode_config(args, config, **given)
     try:
         report = benchmark.run_benchmark(Path(args.out), args.split, count, families, modes, people, jobs=args.jobs,
                                          dask_address=args.dask, cfg=cfg, progress=not args.quiet,
-                                         settings=config, planner=planner)
+                                         settings=config, planner=planner, shield=args.shield)
     except SweepError as e:
         raise UserError(str(e)) from None
     print(benchmark.markdown(report))
@@ -236,7 +242,7 @@ def cmd_reproduce(args) -> int:
         if not is_spec(spec):
             raise UserError(f"--perception: {spec!r} is not module:Class; the built-in modes are flown already")
         check_perception(spec)
-    config = settings(args)
+    config = settings(args, list(args.perception) or ["dodt"])
     output_folder(args.out)
     reproduce(Path(args.out), quick=args.quick, jobs=args.jobs, settings=config, planner=planner,
               perception=tuple(args.perception))

@@ -131,8 +131,7 @@ def test_each_command_help_has_a_description_and_examples(capsys, command):
 def test_episode_commands_help_lists_modes_presets_and_the_planner(capsys, command):
     from dodt.presets import PRESETS
     from experiments.cli import main
-    from experiments.perception_modes import known_modes
-    from experiments.plugins import DEFAULT_PLANNER
+    from experiments.registry import DEFAULT_PLANNER, known_modes
 
     assert main([command, "--help"]) == 0
     epilog = capsys.readouterr().out.split("\nexamples:\n")[1]

@@ -8,13 +8,14 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from dodt.presets import PRESETS, preset
-from experiments.config import _section_classes, parse_value
+from experiments.config import parse_value
+from experiments.registry import builtin_sections
 from experiments.config_limits import LIMITS, Limit, check_config, check_value
 
 
 def _defaults() -> dict:
     """Each section's default configuration: the dataclass' defaults; dodt's from its preset."""
-    return {s: preset("dodt") if s == "dodt" else cls() for s, cls in _section_classes().items()}
+    return builtin_sections()
 
 
 def _leaves(obj, prefix: str):
@@ -61,7 +62,7 @@ def test_each_limit_has_its_fields_type(key):
 def test_string_choices_are_the_codes_own():
     from dodt.learned import views, yolo
     from experiments.commands.common import MAX_FRAME_LATENCY, SEED_MAX
-    from experiments.episode import STATIC_MAPS
+    from experiments.episode_config import STATIC_MAPS
     from sim.scenario import RENDERER_CHOICES
 
     assert LIMITS["episode.renderer"].choices == RENDERER_CHOICES
@@ -93,7 +94,8 @@ def test_every_default_passes():
 def test_every_shipped_scenarios_sizes_pass():
     """The map section applies to the map the episode sized to the scenario; the episode's duration and
     renderer default to the scenario's."""
-    from experiments.episode import default_planner, map_config_for
+    from experiments.episode import map_config_for
+    from experiments.registry import DEFAULT_PLANNER, make_planner
     from sim.scenario import load_scenario, shipped_scenarios
 
     for name in shipped_scenarios():
@@ -101,7 +103,7 @@ def test_every_shipped_scenarios_sizes_pass():
         check_config("map", map_config_for(sc, 0.43))
         check_value("episode.duration", sc.duration)
         check_value("episode.renderer", sc.camera.renderer)
-    planner = default_planner(0.43)  # sized for the simulated drone
+    planner = make_planner(DEFAULT_PLANNER, 0.43)  # sized for the simulated drone
     check_config("shield", planner.cfg)
     check_config("navigator", planner.planner.cfg)
 

@@ -191,6 +191,6 @@ def test_frames_carry_colour_only_for_a_perception_that_reads_it(renderer):
     watched = _Looking(False)  # a viewer (on_frame) may show the colour
     run_episode(make_scenario(), seed=0, perception=watched, cfg=cfg, on_frame=lambda view: None)
     assert all(watched.colors)
-    from experiments.perception_modes import make_perception
+    from experiments.registry import make_perception
 
     assert make_perception("dodt").uses_color is False and make_perception("oracle").uses_color is False

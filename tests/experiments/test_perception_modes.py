@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from dodt.frames import CameraIntrinsics
-from experiments.perception_modes import OracleConfig, OraclePerception, known_modes, make_perception
+from experiments.perception_modes import OracleConfig, OraclePerception
+from experiments.registry import known_modes, make_perception
 from sim.ground_truth import ObstacleTruth
 
 

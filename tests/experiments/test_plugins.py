@@ -5,7 +5,8 @@ import textwrap
 import pytest
 
 from experiments.cli import main
-from experiments.plugins import load_class, make_planner, planner_label
+from experiments.plugins import load_class
+from experiments.registry import make_planner, planner_label
 
 PLUGINS = textwrap.dedent('''
     class Good:
@@ -40,9 +41,12 @@ def plugin_file(tmp_path, monkeypatch):
 def test_a_file_and_a_dotted_module_give_the_class(plugin_file):
     assert load_class(f"{plugin_file}:Good").__name__ == "Good"
     assert load_class("my_plugins:Good").__name__ == "Good"
-    assert type(make_planner("my_plugins:Good")).__name__ == "Good"
-    assert make_planner("default") is None and make_planner(None) is None
+    assert type(make_planner("my_plugins:Good", 0.3)).__name__ == "Good"
+    assert type(make_planner("default", 0.3)).__name__ == "PassiveSafetyShield"
+    shielded = make_planner("my_plugins:Good", 0.3, shield=True)
+    assert type(shielded).__name__ == "PassiveSafetyShield" and type(shielded.planner).__name__ == "Good"
     assert planner_label(None) == "PassiveSafetyShield" and planner_label("my_plugins:Good") == "my_plugins:Good"
+    assert planner_label("my_plugins:Good", shield=True) == "shield+my_plugins:Good"
 
 
 @pytest.mark.parametrize("option, spec, fragment", [
@@ -92,4 +96,4 @@ def test_run_with_a_plugin_planner(tmp_path, monkeypatch):
                "--out", str(out), "--planner", "still2:Hover"])
     s = json.loads((out / "summary.json").read_text())
     assert rc == 0 and s["planner"] == "still2:Hover" and s["perception"] == "oracle"
-    assert s["path_length"] < 0.3 and "config" not in s
+    assert s["path_length"] < 0.3 and s["config"]["set"] == {} and "navigator" not in s["config"]

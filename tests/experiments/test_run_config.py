@@ -6,7 +6,9 @@ import pickle
 import pytest
 
 from experiments.cli import main
-from experiments.config import ConfigError, Settings, build
+from experiments.config import ConfigError, Settings
+from experiments.registry import configured, make_perception, make_planner
+from experiments.registry import settings_for as build
 
 
 def test_file_then_sets_in_order_last_wins(tmp_path):
@@ -21,25 +23,23 @@ def test_file_then_sets_in_order_last_wins(tmp_path):
 
 
 def test_sections_apply_to_their_configurations():
-    from experiments.episode import EpisodeConfig, default_planner
-    from experiments.perception_modes import make_perception
+    from experiments.episode_config import EpisodeConfig
     from planner.voxel_map import MapConfig
 
     s = build(None, ["shield.a_brake=3", "navigator.mpc.horizon=30", "navigator.cruise_speed=1.2", "map.p_hit=0.75",
                      "dodt.kalman.q_pos=0.02", "dodt.ensemble.detectors=[\"udepth\"]", "episode.plan_rate=5",
                      "episode.duration=none"])
-    p = default_planner(0.43, s)
+    p = make_planner("default", 0.43, s)
     assert p.cfg.a_brake == 3.0 and isinstance(p.cfg.a_brake, float) and p.cfg.drone_radius == 0.43
     assert p.planner.cfg.mpc.horizon == 30 and p.planner.cfg.cruise_speed == 1.2 and p.planner.cfg.mpc.robot_radius == 0.43
-    assert s.map_config(MapConfig()).p_hit == 0.75 and s.episode_config(EpisodeConfig()).plan_rate == 5.0
+    assert configured(s, "map", MapConfig()).p_hit == 0.75 and configured(s, "episode", EpisodeConfig()).plan_rate == 5.0
     d = make_perception("dodt-no-fat", settings=s).dodt.cfg
     assert d.kalman.q_pos == 0.02 and d.ensemble.detectors == ("udepth",) and d.association.method == "center"
     assert make_perception("dodt").dodt.cfg.kalman.q_pos != 0.02  # nothing leaks into the presets
 
 
 def test_perception_sections_apply_on_top_of_each_modes_own():
-    from experiments.perception_modes import (NOISY_ORACLE_VELOCITY_NOISE, MovingTrackRule, OracleConfig,
-                                              make_perception)
+    from experiments.perception_modes import NOISY_ORACLE_VELOCITY_NOISE, MovingTrackRule, OracleConfig
 
     s = build(None, ["moving_rule.min_speed=0.7", "moving_rule.height=[0.9, 2.4]", "oracle.max_range=8",
                      "oracle.accel_window=none"])
@@ -61,7 +61,7 @@ def test_perception_sections_apply_on_top_of_each_modes_own():
 def test_values_checked_together_can_be_set_in_any_order(sets):
     from experiments.perception_modes import MovingTrackRule
 
-    rule = build(None, sets).moving_rule_config(MovingTrackRule())
+    rule = configured(build(None, sets), "moving_rule", MovingTrackRule())
     assert (rule.min_speed, rule.max_speed) == (3.0, 4.0)
     with pytest.raises(ConfigError, match=r"^moving_rule.min_speed, moving_rule.max_speed: MovingTrackRule: need"):
         build(None, ["moving_rule.min_speed=3.0", "moving_rule.max_speed=2.0"])
@@ -75,17 +75,17 @@ def test_values_checked_together_can_be_set_in_any_order(sets):
     (["shield.speeds=1.0"], "shield.speeds: expected a list"),
     (["episode.static_map=xyz"], "episode.static_map: 'xyz' is not one of depth, truth"),
     (["planner.x=1"], "planner.x: unknown section 'planner'"),
-    (["dodt.kalman.q_pos=abc"], "dodt.kalman.q_pos=abc: expected a number"),
-    (["dodt.kalman.nope=1"], "dodt.kalman.nope: KalmanConfig has no field 'nope'"),
-    (["map.p_hit=2.0"], "map.p_hit: MapConfig"),
+    (["dodt.kalman.q_pos=abc"], "dodt.kalman.q_pos: expected a number"),
+    (["dodt.kalman.nope=1"], "dodt.kalman.nope: unknown key; KalmanConfig has no field 'nope'"),
+    (["map.p_hit=2.0"], "map.p_hit: 2.0 is not a number in (0.5, 1)"),
     (["shield.a_brake"], "expected section.key=value"),
     (["navigator.mpc.horizon=30", "navigator.mpc=3"], "a key is a value or a section, not both"),
     (["moving_rule.nope=1"], "moving_rule.nope: unknown key; MovingTrackRule has no field 'nope'"),
     (["moving_rule.min_speed=3.0"], "moving_rule.min_speed: MovingTrackRule: need 0 <= min_speed <= max_speed"),
-    (["moving_rule.height=[2.0, 1.0]"], "moving_rule.height: MovingTrackRule: height must be [low, high]"),
+    (["moving_rule.height=[2.0, 1.0]"], "moving_rule.height: [2.0, 1.0] is not in increasing order"),
     (["moving_rule.height=1.5"], "moving_rule.height: expected a list"),
-    (["moving_rule.on_structure=2"], "moving_rule.on_structure: MovingTrackRule: on_structure is a share"),
-    (["oracle.max_range=0"], "oracle.max_range: OracleConfig: max_range must be > 0"),
+    (["moving_rule.on_structure=2"], "moving_rule.on_structure: 2.0 is not a number in [0, 1]"),
+    (["oracle.max_range=0"], "oracle.max_range: 0.0 is not a number in (0, 100]"),
     (["oracle.noise_seed=1.5"], "oracle.noise_seed: expected a whole number, got 1.5"),
     (["oracle.all_around=true"], "oracle.all_around: unknown key; OracleConfig has no field 'all_around'"),
 ])
@@ -156,7 +156,9 @@ def test_a_dodt_run_records_its_moving_rule_and_dodt_sections(tmp_path):
     c = json.loads((out / "summary.json").read_text())["config"]
     assert c["set"] == {"moving_rule.min_speed": 0.6, "moving_rule.height": [0.9, 2.4]}
     assert c["moving_rule"]["min_speed"] == 0.6 and c["moving_rule"]["height"] == [0.9, 2.4]
-    assert c["moving_rule"]["max_speed"] == 2.5 and "oracle" not in c and "dodt" not in c
+    # every section the episode used, overridden or not, with its full values; none it did not use
+    assert c["moving_rule"]["max_speed"] == 2.5 and "oracle" not in c and c["dodt"]["kalman"]["q_pos"] > 0
+    assert {"episode", "shield", "navigator", "map", "dodt", "moving_rule"} <= set(c)
     with gzip.open(out / "log.jsonl.gz", "rt") as fh:
         assert json.loads(fh.readline())["config"] == c
 

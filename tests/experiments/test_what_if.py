@@ -8,7 +8,7 @@ import pytest
 from dodt.frames import CameraIntrinsics
 from dodt.protocol import PerceptionOutput
 from experiments import what_if
-from experiments.perception_modes import make_perception
+from experiments.registry import make_perception
 from planner.types import ObstaclePrediction
 from sim.ground_truth import ObstacleTruth
 
@@ -38,7 +38,7 @@ class _Reports:
     def __init__(self, *reports):
         self.reports, self.structure_test = reports, None
 
-    def reset(self):
+    def reset(self, context=None):
         pass
 
     def update(self, frame, truth=None):
@@ -122,8 +122,17 @@ def test_combined_completes_the_view_and_the_recently_left_and_corrects_the_repo
 def test_what_if_modes_need_the_truth_and_plug_in_by_name():
     p = make_perception("experiments.what_if:ViewCompleted")
     assert isinstance(p, what_if.ViewCompleted) and p.uses_ground_truth and p.name == "dodt+ViewCompleted"
-    test = object()
-    p.structure_test = test  # the closed loop's map test reaches DODT's moving-track rule
-    assert p.dodt.structure_test is test
+    ctx = _context_with_map()
+    p.reset(ctx)  # the episode context's static map reaches DODT's moving-track rule
+    assert p.dodt.structure_test == ctx.static_map.established_fraction
     with pytest.raises(ValueError, match="ViewCompleted needs the simulator's ground truth"):
         p.update(_frame(), None)
+
+
+def _context_with_map():
+    from dataclasses import replace as _replace
+
+    from context_factory import example_context
+    from planner.voxel_map import VoxelMap
+
+    return _replace(example_context(), static_map=VoxelMap())

@@ -1,4 +1,4 @@
-"""Property: the default planner (whatever ``experiments.episode.default_planner`` returns) never raises
+"""Property: the default planner (whatever ``experiments.registry.make_planner`` returns) never raises
 and always returns a finite trajectory, whatever its input: positions, velocities, stamps and goals that
 are NaN, infinite or huge, obstacles with such values, occupancy maps of any content, inverted or
 missing geofences, and such inputs arriving after valid plans (its state carried from one call to the
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from experiments.episode import default_planner
+from experiments.registry import DEFAULT_PLANNER, make_planner
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 from planner.voxel_map import MapConfig, VoxelMap
 
@@ -106,7 +106,7 @@ def assert_finite_trajectory(tr) -> None:
 
 @pytest.fixture(scope="module")
 def planner():
-    pl = default_planner(ROBOT_RADIUS)
+    pl = make_planner(DEFAULT_PLANNER, ROBOT_RADIUS)
     pl.plan(_valid(0.0))  # compile what it compiles once, outside the examples
     return pl
 

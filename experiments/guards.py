@@ -1,0 +1,228 @@
+"""The boundary between the closed loop and the modules it calls: nothing a planner or a perception module
+does (raise, return the wrong thing) stops an episode or goes unreported.
+
+- ``PlannerGuard``: a plan that raises or is not a well-formed ``Trajectory`` becomes a brake-and-hold
+  trajectory (status ``error:<what>``), counted.
+- ``PerceptionGuard``: an update that raises or is not a well-formed ``PerceptionOutput`` becomes a
+  skipped frame (``error:<what>``), counted; the last good obstacles stay.
+- ``ModuleErrors``: the counts and the first error of each module, with its traceback: printed once,
+  written to the episode folder (``errors.txt``) and into the summary.
+- ``planner_telemetry``: what a planner tells the log about its latest plan, through its one optional
+  ``telemetry()`` method.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import traceback
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from dodt.protocol import PerceptionOutput, TrackReport
+from planner.fallback import brake_and_hold
+from planner.types import ObstaclePrediction, PlannerInput, Trajectory
+
+DEFAULT_BRAKE_ACCEL = 2.0  # m/s^2: the brake-and-hold's deceleration for a planner that states none
+
+
+class BadOutput(ValueError):
+    """A module's output that does not follow its protocol; the message names the field."""
+
+
+@dataclass
+class ModuleErrors:
+    """Errors of one module (``planner`` or ``perception``) in one episode."""
+
+    module: str  # "planner" or "perception"
+    label: str  # the module's name or spec
+    count: int = 0
+    first: str | None = None  # the first error's traceback (or the bad output's description)
+    first_time: float | None = None  # s, sim time of the first error
+    kinds: dict[str, int] = field(default_factory=dict)
+
+    def add(self, t: float, kind: str, text: str) -> None:
+        self.count += 1
+        self.kinds[kind] = self.kinds.get(kind, 0) + 1
+        if self.first is None:
+            self.first, self.first_time = text, t
+            print(f"{self.module} {self.label} failed at t = {t:.2f} s ({kind}); later failures are counted:\n"
+                  f"{text.rstrip()}", file=sys.stderr, flush=True)
+
+    def summary(self) -> dict:
+        return {"count": self.count, "kinds": dict(self.kinds), "first_time": self.first_time,
+                "first": self.first}
+
+
+def _error_text(e: BaseException) -> str:
+    return "".join(traceback.format_exception(type(e), e, e.__traceback__))
+
+
+def _finite_array(a, shape_ok, what: str) -> np.ndarray:
+    try:
+        x = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        raise BadOutput(f"{what}: not an array of numbers ({type(a).__name__})") from None
+    if not shape_ok(x.shape):
+        raise BadOutput(f"{what}: wrong shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise BadOutput(f"{what}: holds NaN or infinite values")
+    return x
+
+
+def _finite_number(v, what: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
+        raise BadOutput(f"{what}: expected a finite number, got {v!r}")
+    return float(v)
+
+
+def check_trajectory(traj) -> Trajectory:
+    """``traj`` if it is a well-formed Trajectory (shapes, finite values, dt > 0); BadOutput otherwise."""
+    if not isinstance(traj, Trajectory):
+        raise BadOutput(f"plan() returned {type(traj).__name__}, not a planner.types.Trajectory")
+    _finite_number(traj.t0, "Trajectory.t0")
+    if not _finite_number(traj.dt, "Trajectory.dt") > 0.0:
+        raise BadOutput(f"Trajectory.dt: expected seconds > 0, got {traj.dt!r}")
+    a = _finite_array(traj.accelerations, lambda s: len(s) == 2 and s[1] == 3, "Trajectory.accelerations (N, 3)")
+    n = a.shape[0]
+    _finite_array(traj.positions, lambda s: s == (n + 1, 3), f"Trajectory.positions (N+1, 3) with N = {n}")
+    _finite_array(traj.velocities, lambda s: s == (n + 1, 3), f"Trajectory.velocities (N+1, 3) with N = {n}")
+    if traj.yaw is not None:
+        _finite_number(traj.yaw, "Trajectory.yaw")
+    _finite_number(traj.solve_ms, "Trajectory.solve_ms")
+    if not isinstance(traj.status, str):
+        raise BadOutput(f"Trajectory.status: expected a string, got {traj.status!r}")
+    return traj
+
+
+def planner_telemetry(planner) -> dict:
+    """The planner's ``telemetry()`` (nothing for a planner without one): ``path`` (K, 2 or 3) or None,
+    ``threats`` (M, 3) x, y, radius of the people it kept its plan from, ``forgotten`` [(x, y, why)],
+    ``brake_accel`` m/s^2. Malformed entries are dropped, not raised."""
+    get = getattr(planner, "telemetry", None)
+    if not callable(get):
+        return {}
+    try:
+        raw = get()
+    except Exception:  # noqa: BLE001 - telemetry is a report, never a failure of the loop
+        return {}
+    if not isinstance(raw, dict):
+        return {}
+    out = {}
+    path = raw.get("path")
+    if path is not None:
+        p = np.asarray(path, dtype=float) if _numeric(path) else None
+        if p is not None and p.ndim == 2 and p.shape[1] in (2, 3) and np.all(np.isfinite(p)):
+            out["path"] = p
+    th = raw.get("threats")
+    if th is not None and _numeric(th):
+        th = np.asarray(th, dtype=float)
+        if th.ndim == 2 and th.shape[1] == 3:
+            out["threats"] = th[np.all(np.isfinite(th), axis=1)]
+    gone = []
+    for g in raw.get("forgotten") or ():
+        try:
+            x, y, why = g
+            if math.isfinite(float(x)) and math.isfinite(float(y)):
+                gone.append((float(x), float(y), str(why)))
+        except (TypeError, ValueError):
+            continue
+    if gone:
+        out["forgotten"] = gone
+    b = raw.get("brake_accel")
+    if isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) and b > 0:
+        out["brake_accel"] = float(b)
+    return out
+
+
+def _numeric(a) -> bool:
+    try:
+        np.asarray(a, dtype=float)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def _guarded(call, errors: ModuleErrors, stamp: float):
+    """(``call()``, None), or (None, what went wrong) with the failure counted in ``errors``. A module's
+    ``sys.exit`` is a failure like any other; only a keyboard interrupt goes through."""
+    try:
+        return call(), None
+    except KeyboardInterrupt:
+        raise
+    except BadOutput as e:
+        errors.add(stamp, "bad output", f"{e}\n")
+        return None, "bad-output"
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - a module's failure: the loop goes on without it
+        errors.add(stamp, type(e).__name__, _error_text(e))
+        return None, type(e).__name__
+
+
+class PlannerGuard:
+    """Calls ``planner.plan`` and returns a trajectory the loop can fly, whatever happens."""
+
+    def __init__(self, planner, label: str):
+        self.planner = planner
+        self.errors = ModuleErrors("planner", label)
+
+    def plan(self, inp: PlannerInput) -> Trajectory:
+        traj, kind = _guarded(lambda: check_trajectory(self.planner.plan(inp)), self.errors, inp.stamp)
+        if traj is not None:
+            return traj
+        brake = planner_telemetry(self.planner).get("brake_accel", DEFAULT_BRAKE_ACCEL)
+        return brake_and_hold(inp.stamp, inp.position, inp.velocity, a_max=brake, status=f"error:{kind}")
+
+
+def check_output(out) -> PerceptionOutput:
+    """``out`` if it is a well-formed PerceptionOutput, its tracks as TrackReports (a plug-in may give their
+    JSON form); BadOutput naming the field otherwise."""
+    if not isinstance(out, PerceptionOutput):
+        raise BadOutput(f"update() returned {type(out).__name__}, not a dodt.protocol.PerceptionOutput")
+    _finite_number(out.stamp, "PerceptionOutput.stamp")
+    if not isinstance(out.obstacles, (tuple, list)):
+        raise BadOutput(f"PerceptionOutput.obstacles: expected a tuple, got {type(out.obstacles).__name__}")
+    for i, o in enumerate(out.obstacles):
+        if not isinstance(o, ObstaclePrediction):
+            raise BadOutput(f"PerceptionOutput.obstacles[{i}]: {type(o).__name__}, not a "
+                            f"planner.types.ObstaclePrediction")
+        for name in ("center", "size", "velocity", "acceleration"):
+            _finite_array(getattr(o, name), lambda s: s == (3,), f"PerceptionOutput.obstacles[{i}].{name} (3,)")
+        for name in ("position_std", "std_growth", "accel_horizon", "max_speed"):
+            _finite_number(getattr(o, name), f"PerceptionOutput.obstacles[{i}].{name}")
+    if not isinstance(out.clear_boxes, (tuple, list)):
+        raise BadOutput("PerceptionOutput.clear_boxes: expected a tuple of (center, size)")
+    for i, box in enumerate(out.clear_boxes):
+        if not (isinstance(box, (tuple, list)) and len(box) == 2):
+            raise BadOutput(f"PerceptionOutput.clear_boxes[{i}]: expected (center (3,), size (3,))")
+        for part, name in zip(box, ("center", "size")):
+            _finite_array(part, lambda s: s == (3,), f"PerceptionOutput.clear_boxes[{i}] {name} (3,)")
+    if not isinstance(out.tracks, (tuple, list)):
+        raise BadOutput("PerceptionOutput.tracks: expected a tuple of dodt.protocol.TrackReport")
+    tracks = []
+    for i, tr in enumerate(out.tracks):
+        if isinstance(tr, TrackReport):
+            tracks.append(tr)
+            continue
+        if not isinstance(tr, dict):
+            raise BadOutput(f"PerceptionOutput.tracks[{i}]: {type(tr).__name__}, not a TrackReport")
+        try:
+            tracks.append(TrackReport.from_json(tr))
+        except (KeyError, TypeError, ValueError) as e:
+            raise BadOutput(f"PerceptionOutput.tracks[{i}]: not a track ({type(e).__name__}: {e})") from None
+    if out.skipped is not None and not isinstance(out.skipped, str):
+        raise BadOutput(f"PerceptionOutput.skipped: expected a reason (text) or None, got {out.skipped!r}")
+    return out if all(a is b for a, b in zip(tracks, out.tracks)) else replace(out, tracks=tuple(tracks))
+
+
+class PerceptionGuard:
+    """Calls ``perception.update`` and returns an output the loop can use, whatever happens."""
+
+    def __init__(self, perception, label: str):
+        self.perception = perception
+        self.errors = ModuleErrors("perception", label)
+
+    def update(self, frame, truth) -> PerceptionOutput:
+        out, kind = _guarded(lambda: check_output(self.perception.update(frame, truth)), self.errors, frame.stamp)
+        if out is not None:
+            return out
+        return PerceptionOutput(stamp=frame.stamp, obstacles=(), skipped=f"error:{kind}")
