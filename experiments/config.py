@@ -270,6 +270,9 @@ def read_file(path: str | Path) -> list[tuple[str, Any]]:
         raise ConfigError(f"--config: {path} is a folder, not a TOML file") from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"--config: {path}: not valid TOML ({e})") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"--config: {path}: not a UTF-8 text file (byte 0x{e.object[e.start]:02x} at offset "
+                          f"{e.start})") from None
     except OSError as e:
         raise ConfigError(f"--config: cannot read {path}: {e.strerror or e}") from None
     return [(k, v) for k, v in _flatten(data)]
@@ -285,21 +288,35 @@ def parse_set(text: str) -> tuple[str, Any]:
 
 def build(config_file: str | Path | None = None, sets: typing.Iterable[str] = ()) -> Settings:
     """Settings from a TOML file and ``--set`` assignments (after the file, in order), each key and value
-    checked against its section's dataclass now (ConfigError naming the key when wrong)."""
+    checked against its section's dataclass now (ConfigError naming the key when wrong; the file's path first
+    when a key it names, or a key within a section it names, has its value from the file)."""
     pairs = read_file(config_file) if config_file else []
+    n_file = len(pairs)
     pairs += [parse_set(s) for s in sets]
+    from_file: set[str] = set()  # the keys whose last value is the file's
     by_section: dict[str, dict[str, Any]] = {s: {} for s in SECTIONS}
-    for key, value in pairs:
-        section, _, rest = key.partition(".")
-        if section not in by_section:
-            raise ConfigError(f"{key}: unknown section {section!r}; sections: {', '.join(SECTIONS)}")
-        if not rest:
-            raise ConfigError(f"{key}: expected {section}.<field>")
-        d = by_section[section]
-        d.pop(rest, None)  # the last value wins, in the order of its last assignment
-        d[rest] = tuple(value) if isinstance(value, list) else value
-    settings = Settings(**{s: tuple(d.items()) for s, d in by_section.items()})
-    check(settings)
+    try:
+        for i, (key, value) in enumerate(pairs):
+            if i < n_file:
+                from_file.add(key)
+            else:  # a --set of the key: its value is no longer the file's
+                from_file.discard(key)
+            section, _, rest = key.partition(".")
+            if section not in by_section:
+                raise ConfigError(f"{key}: unknown section {section!r}; sections: {', '.join(SECTIONS)}")
+            if not rest:
+                raise ConfigError(f"{key}: expected {section}.<field>")
+            d = by_section[section]
+            d.pop(rest, None)  # the last value wins, in the order of its last assignment
+            d[rest] = tuple(value) if isinstance(value, list) else value
+        settings = Settings(**{s: tuple(d.items()) for s, d in by_section.items()})
+        check(settings)
+    except ConfigError as e:
+        # a message starts with the keys or the section it is about: "a.b, a.c: ...", "dodt.x=raw: ...", "a: ..."
+        named = str(e).split(":", 1)[0].split("=", 1)[0].split(", ")
+        if any(k == n or k.startswith(n + ".") for k in from_file for n in named):
+            raise ConfigError(f"{config_file}: {e}") from None
+        raise
     return settings
 
 
