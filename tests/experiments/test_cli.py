@@ -186,3 +186,25 @@ def test_bench_takes_the_options_of_its_bench_and_fills_in_the_defaults():
     args = build_parser().parse_args(["bench", "perception", "--quick", "--seeds", "2"])
     check_applies(args)
     assert (args.quick, args.seeds, args.out, args.duration) == (True, 2, "runs/bench_perception", None)
+
+
+def test_version_prints_the_package_version(capsys):
+    import importlib.metadata
+
+    from experiments.cli import main
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"dodt-nav {importlib.metadata.version('dodt-nav')}\n"
+
+
+def test_version_from_a_source_tree_that_was_never_installed(monkeypatch, capsys):
+    import importlib.metadata
+
+    from experiments.cli import main
+
+    def missing(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", missing)
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == "dodt-nav unknown (not installed)\n"
