@@ -11,6 +11,7 @@ experiments.commands.common.
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import signal
 import sys
 import threading
@@ -48,8 +49,22 @@ class _Parser(argparse.ArgumentParser):
         return super().format_help()
 
 
+DISTRIBUTION = "dodt-nav"  # the package's name in pyproject.toml
+
+
+def version() -> str:
+    """The installed package's version (its metadata), or a note when it is run from a source tree that was
+    never installed."""
+    try:
+        return importlib.metadata.version(DISTRIBUTION)
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="dodt-nav", description=DESCRIPTION, epilog=EPILOG, formatter_class=HelpFormatter)
+    ap.add_argument("--version", action="version", version=f"%(prog)s {version()}",
+                    help="print the version and exit")
     sub = ap.add_subparsers(dest="command", required=True)
     add_parsers(sub)
     return ap

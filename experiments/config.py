@@ -245,7 +245,8 @@ def read_file(path: str | Path) -> list[tuple[str, Any]]:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise ConfigError(f"--config: {path}: not UTF-8 text (byte {e.start})") from None
+        raise ConfigError(f"--config: {path}: not a UTF-8 text file (byte 0x{raw[e.start]:02x} at offset "
+                          f"{e.start})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -290,7 +291,7 @@ def build(sections: Mapping[str, Any], config_file: str | Path | None = None, se
         try:
             settings.apply(name, sections[name], check)
         except ConfigError as e:
-            key = str(e).split(":", 1)[0]
-            where = origin.get(key)
+            keys = str(e).split(":", 1)[0].split(", ")  # the message names the keys it is about
+            where = next((origin[k] for k in keys if origin.get(k)), None)
             raise ConfigError(f"{where}: {e}" if where else str(e)) from None
     return settings

@@ -35,6 +35,7 @@ from typing import Iterator
 
 import cv2
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from dodt.frames import CameraIntrinsics, SensorFrame
 
@@ -72,30 +73,13 @@ def read_list(path: Path) -> list[tuple[float, str]]:
 
 
 def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a quaternion (x, y, z, w), normalised first."""
-    x, y, z, w = np.asarray(q, float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    """Rotation matrix of a quaternion (x, y, z, w: TUM's order, scipy's scalar-last), normalised first."""
+    return Rotation.from_quat(np.asarray(q, float)).as_matrix()
 
 
 def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
     """Quaternion (x, y, z, w), w >= 0, of a rotation matrix."""
-    R = np.asarray(R, float)
-    t = np.trace(R)
-    if t > 0:
-        s = 2.0 * math.sqrt(t + 1.0)
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
-    else:
-        i = int(np.argmax(np.diag(R)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(max(1.0 + R[i, i] - R[j, j] - R[k, k], 1e-300))
-        q = [0.0] * 4
-        q[i] = 0.25 * s
-        q[j] = (R[j, i] + R[i, j]) / s
-        q[k] = (R[k, i] + R[i, k]) / s
-        q[3] = (R[k, j] - R[j, k]) / s
-    q = np.array(q)
+    q = Rotation.from_matrix(np.asarray(R, float)).as_quat()
     return q if q[3] >= 0 else -q
 
 

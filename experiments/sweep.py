@@ -16,10 +16,10 @@ import os
 import shutil
 import sys
 import time
+import xml.etree.ElementTree as ET
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import replace
 from pathlib import Path
-from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
@@ -405,22 +405,21 @@ def markdown(agg: dict) -> str:
 
 def junit(agg: dict, summaries_by_seed: dict[int, dict]) -> str:
     """JUnit XML: one test case per seed; a collision or a timeout is a failure."""
-    cases = []
+    suite = ET.Element("testsuite", name=f"dodt-nav sweep {agg['scenario']} {agg['perception']}")
     failures = 0
     for row in agg["per_seed"]:
         s = summaries_by_seed.get(row["seed"], {})
-        name = f"seed_{row['seed']:04d}"
-        t = s.get("sim_time", 0.0)
-        body = ""
+        case = ET.SubElement(suite, "testcase", classname=f"{agg['scenario']}.{agg['perception']}",
+                             name=f"seed_{row['seed']:04d}", time=str(s.get("sim_time", 0.0)))
         if not row["success"]:
             failures += 1
             faults = ", ".join(row.get("faults") or [])
             msg = (f"{row['failure_reason'] or 'failure'}: {row['collisions']} collision(s)"
                    + (f" ({faults})" if faults else ""))
-            detail = json.dumps({k: s.get(k) for k in ("collisions", "min_clearance", "time_to_goal", "sim_time")})
-            body = f"<failure message={quoteattr(msg)}>{escape(detail)}</failure>"
-        cls = quoteattr(f"{agg['scenario']}.{agg['perception']}")
-        cases.append(f'  <testcase classname={cls} name="{name}" time="{t}">{body}</testcase>')
-    suite = quoteattr(f"dodt-nav sweep {agg['scenario']} {agg['perception']}")
-    return (f'<?xml version="1.0" encoding="UTF-8"?>\n<testsuite name={suite} tests="{len(cases)}" '
-            f'failures="{failures}" errors="0">\n' + "\n".join(cases) + "\n</testsuite>\n")
+            failure = ET.SubElement(case, "failure", message=msg)
+            failure.text = json.dumps({k: s.get(k) for k in ("collisions", "min_clearance", "time_to_goal", "sim_time")})
+    suite.set("tests", str(len(agg["per_seed"])))
+    suite.set("failures", str(failures))
+    suite.set("errors", "0")
+    ET.indent(suite, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(suite, encoding="unicode") + "\n"

@@ -11,6 +11,28 @@ from experiments.commands.common import (RENDERER_HELP, LazyText, UserError, add
                                          output_folder, seconds, whole, writable_file)
 
 
+BENCHES = ("sim", "perception", "runtime", "planner", "loop")
+# The benches each option applies to: given to another bench, it is refused (cmd_bench).
+APPLIES_TO = {
+    "--scenario": ("sim", "runtime", "planner", "loop"),
+    "--seconds": ("sim", "runtime", "loop"),
+    "--out": ("perception",),
+    "--seeds": ("perception", "planner"),
+    "--scenarios": ("perception",),
+    "--configs": ("perception",),
+    "--duration": ("perception",),
+    "--quick": ("perception",),
+    "--rates": ("perception",),
+    "--config": ("runtime", "planner", "loop"),
+    "--frames": ("sim",),
+    "--json": ("sim", "runtime", "planner"),
+    "--renderer": ("loop",),
+}
+# The value of an option that was not given, where it has one (the rest: None, --quick False).
+DEFAULTS = {"--scenario": "corridor", "--seconds": 10.0, "--out": "runs/bench_perception", "--config": "dodt",
+            "--frames": 30}
+
+
 def add_parser(sub) -> None:
     b = add_command(
         sub, "bench", help="benchmarks that print figures",
@@ -28,25 +50,42 @@ def add_parser(sub) -> None:
             "dodt-nav bench loop --config oracle --seconds 5",
         ) + "\n\n" + dodt_presets()),
         func=cmd_bench)
-    b.add_argument("what", choices=("sim", "perception", "runtime", "planner", "loop"),
+    b.add_argument("what", choices=BENCHES,
                    help="sim: render/physics/real-time; perception: Table I; runtime: Table II; planner: voxel map "
                         "update, MPC and whole-planner times; loop: real-time factor of a closed-loop episode")
-    b.add_argument("--scenario", default=None, help="sim, runtime, planner: the scenario (default corridor)")
-    b.add_argument("--seconds", type=seconds, default=10.0, help="simulated seconds (sim: real-time figure; runtime: frames)")
-    b.add_argument("--out", default="runs/bench_perception", help="perception: output folder")
-    b.add_argument("--seeds", type=whole(1, 10_000), default=None, help="perception: seeds 0..N-1 per scenario; planner: episodes "
-                                                                        "replayed (seeds 0..N-1, default 2)")
-    b.add_argument("--scenarios", default=None, help="perception: comma-separated scenarios")
-    b.add_argument("--configs", default=None, help="perception: comma-separated configurations")
-    b.add_argument("--duration", type=seconds, default=None, help="perception: seconds per scenario")
-    b.add_argument("--quick", action="store_true", help="perception: 6 s per scenario")
-    b.add_argument("--rates", default=None, metavar="HZ,...",
-                   help="perception: also score each configuration on the frames decimated to these rates "
-                        "(e.g. 30,15,10,5), rows named config@RATEHz")
-    b.add_argument("--config", default="dodt", help="runtime: the configuration; loop, planner: the perception mode")
-    b.add_argument("--frames", type=whole(1, 100_000), default=30, help="frames for the render medians")
-    b.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
-    b.add_argument("--renderer", choices=RENDERER_CHOICES, default=None, help="loop: " + RENDERER_HELP)
+    # Every option but "what" is None (--quick: False) unless given, so that cmd_bench can refuse one given to a
+    # bench it does not apply to (APPLIES_TO); DEFAULTS holds the values of those that have one.
+    def opt(flag: str, help: str, **kw) -> None:
+        b.add_argument(flag, help=f"{', '.join(APPLIES_TO[flag])}: {help}", **{"default": None, **kw})
+
+    opt("--scenario", "the scenario (default corridor)")
+    opt("--seconds", "simulated seconds (sim: of the real-time figure; runtime: of the frames timed; loop: the "
+                     "episode's length); default 10", type=seconds)
+    opt("--out", "output folder (default runs/bench_perception)")
+    opt("--seeds", "seeds 0..N-1 (perception: per scenario, default 1; planner: the episodes replayed, default 2)",
+        type=whole(1, 10_000))
+    opt("--scenarios", "comma-separated scenarios")
+    opt("--configs", "comma-separated configurations")
+    opt("--duration", "seconds per scenario", type=seconds)
+    opt("--quick", "6 s per scenario", action="store_true", default=False)
+    opt("--rates", "also score each configuration on the frames decimated to these rates (e.g. 30,15,10,5), "
+                   "rows named config@RATEHz", metavar="HZ,...")
+    opt("--config", "the DODT configuration (runtime) or the perception mode (planner, loop); default dodt")
+    opt("--frames", "frames for the render medians (default 30)", type=whole(1, 100_000))
+    opt("--json", "also write the figures as JSON", type=Path)
+    opt("--renderer", RENDERER_HELP, choices=RENDERER_CHOICES)
+
+
+def check_applies(args) -> None:
+    """Refuse an option given to a bench it does not apply to (UserError naming it and its benches), and
+    set the defaults of those not given."""
+    for flag, benches in APPLIES_TO.items():
+        dest = flag[2:]
+        given = getattr(args, dest) not in (None, False)
+        if given and args.what not in benches:
+            raise UserError(f"bench {args.what}: {flag} applies only to bench {', '.join(benches)}")
+        if not given and flag in DEFAULTS:
+            setattr(args, dest, DEFAULTS[flag])
 
 
 def parse_rates(text: str) -> list[float]:
@@ -62,13 +101,14 @@ def parse_rates(text: str) -> list[float]:
 
 
 def cmd_bench(args) -> int:
+    check_applies(args)
     if args.json is not None:
         writable_file(args.json, "--json")
     if args.what == "sim":
         from experiments.bench_sim import run
 
-        load_scenario(args.scenario or "corridor")  # validate before anything heavy
-        run(args.scenario or "corridor", seconds=args.seconds, frames=args.frames, json_out=args.json)
+        load_scenario(args.scenario)  # validate before anything heavy
+        run(args.scenario, seconds=args.seconds, frames=args.frames, json_out=args.json)
         return 0
     if args.what == "perception":
         from dodt.presets import PRESETS
@@ -95,14 +135,14 @@ def cmd_bench(args) -> int:
         bench_update()
         for seed in range(3):
             bench_mpc(seed=seed)
-        out = bench_planner.run(args.scenario or "corridor", range(args.seeds or 2), perception=args.config)
+        out = bench_planner.run(args.scenario, range(args.seeds or 2), perception=args.config)
         if args.json:
             args.json.write_text(json.dumps(out, indent=1) + "\n")
         return 0
     if args.what == "loop":
         from experiments.episode import EpisodeConfig, run_episode
 
-        sc = load_scenario(args.scenario or "corridor")
+        sc = load_scenario(args.scenario)
         runs = []
         for _ in range(3):  # the same episode three times: the median real-time factor is quoted
             runs.append(run_episode(sc, seed=0, perception=args.config, cfg=EpisodeConfig(duration=args.seconds),
@@ -118,7 +158,7 @@ def cmd_bench(args) -> int:
         return 0
     from experiments import bench_perception
 
-    load_scenario(args.scenario or "corridor")
-    bench_perception.run_runtime(args.config, args.scenario or "corridor", seconds=args.seconds if args.seconds else 6.0,
+    load_scenario(args.scenario)
+    bench_perception.run_runtime(args.config, args.scenario, seconds=args.seconds,
                                  json_out=args.json)
     return 0

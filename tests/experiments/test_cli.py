@@ -90,7 +90,8 @@ def test_sweep_renderer_option_reaches_every_episode(monkeypatch, tmp_path, rend
 
     seen = []
 
-    def fake(scenario, seeds, perception, out, jobs, dask_address, keep_logs, progress, cfg, settings=None, planner=None):
+    def fake(scenario, seeds, perception, out, jobs, dask_address, keep_logs, progress, cfg, settings=None, planner=None,
+             shield=False):
         seen.append(cfg.renderer)
         return sweep.aggregate([], scenario, perception)
 
@@ -139,3 +140,71 @@ def test_episode_commands_help_lists_modes_presets_and_the_planner(capsys, comma
     for name in known_modes() + tuple(PRESETS):
         assert f" {name}," in listed or f" {name} " in listed or listed.endswith(f" {name}")
     assert f"built-in planner (--planner): {DEFAULT_PLANNER} (" in listed
+
+
+# An option of `bench` and a bench it does not apply to, with the benches it does.
+BENCH_MISFITS = [
+    ("perception", ["--scenario", "corridor"], "sim, runtime, planner, loop"),
+    ("perception", ["--seconds", "3"], "sim, runtime, loop"),
+    ("sim", ["--out", "OUT"], "perception"),
+    ("sim", ["--seeds", "2"], "perception, planner"),
+    ("runtime", ["--scenarios", "circles"], "perception"),
+    ("loop", ["--configs", "dodt"], "perception"),
+    ("sim", ["--duration", "2"], "perception"),
+    ("sim", ["--quick"], "perception"),
+    ("runtime", ["--rates", "15"], "perception"),
+    ("sim", ["--config", "oracle"], "runtime, planner, loop"),
+    ("runtime", ["--frames", "5"], "sim"),
+    ("perception", ["--json", "OUT.json"], "sim, runtime, planner"),
+    ("sim", ["--renderer", "tiny"], "loop"),
+]
+
+
+@pytest.mark.parametrize("what, option, benches", BENCH_MISFITS, ids=[f"{c[0]} {c[1][0]}" for c in BENCH_MISFITS])
+def test_bench_refuses_an_option_that_does_not_apply_to_it(monkeypatch, tmp_path, capsys, what, option, benches):
+    import experiments.commands.bench as bench
+    from experiments.cli import main
+
+    def ran(*a, **k):
+        raise AssertionError("the bench started")
+
+    monkeypatch.setattr(bench, "load_scenario", ran)
+    option = [a.replace("OUT", str(tmp_path / "out")) for a in option]
+    assert main(["bench", what, *option]) == 2
+    err = capsys.readouterr().err
+    assert err == f"dodt-nav: error: bench {what}: {option[0]} applies only to bench {benches}\n"
+    assert not (tmp_path / "out").exists() and not (tmp_path / "out.json").exists()
+
+
+def test_bench_takes_the_options_of_its_bench_and_fills_in_the_defaults():
+    from experiments.cli import build_parser
+    from experiments.commands.bench import check_applies
+
+    args = build_parser().parse_args(["bench", "loop", "--seconds", "5", "--renderer", "tiny"])
+    check_applies(args)
+    assert (args.seconds, args.renderer, args.scenario, args.config) == (5.0, "tiny", "corridor", "dodt")
+    args = build_parser().parse_args(["bench", "perception", "--quick", "--seeds", "2"])
+    check_applies(args)
+    assert (args.quick, args.seeds, args.out, args.duration) == (True, 2, "runs/bench_perception", None)
+
+
+def test_version_prints_the_package_version(capsys):
+    import importlib.metadata
+
+    from experiments.cli import main
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"dodt-nav {importlib.metadata.version('dodt-nav')}\n"
+
+
+def test_version_from_a_source_tree_that_was_never_installed(monkeypatch, capsys):
+    import importlib.metadata
+
+    from experiments.cli import main
+
+    def missing(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", missing)
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == "dodt-nav unknown (not installed)\n"

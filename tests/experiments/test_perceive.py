@@ -166,6 +166,24 @@ def test_poses_are_interpolated_and_a_frame_without_one_is_counted():
         np.testing.assert_allclose(quaternion_to_matrix(matrix_to_quaternion(R)), R, atol=1e-12)
 
 
+def test_quaternion_conversions_agree_with_rodrigues_formula():
+    """TUM's (qx, qy, qz, qw) against axis-angle rotations made by OpenCV's Rodrigues formula, to 1e-12:
+    the matrix of any scaled quaternion, and the quaternion (w >= 0) of the matrix."""
+    rng = np.random.default_rng(0)
+    axes = rng.normal(size=(500, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([rng.uniform(0.0, math.pi - 1e-6, 496), [0.0, 1e-9, 1.0, math.pi - 1e-6]])
+    for n, th in zip(axes, angles):
+        R, _ = cv2.Rodrigues(n * th)
+        q = np.array([*(math.sin(th / 2) * n), math.cos(th / 2)])
+        assert np.allclose(quaternion_to_matrix(q * rng.uniform(0.1, 10.0)), R, rtol=0, atol=1e-12)
+        assert np.allclose(matrix_to_quaternion(R), q, rtol=0, atol=1e-12)
+    for R in (np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0])):  # half turns
+        q = matrix_to_quaternion(R)
+        assert q[3] == 0 and np.array_equal(np.abs(q[:3]), (np.diag(R) == 1).astype(float))  # about that axis
+        assert np.allclose(quaternion_to_matrix(q), R, rtol=0, atol=1e-12)
+
+
 def test_the_tum_writer_round_trip(tmp_path):
     """Frames written by TumWriter read back with the same stamps, poses and depth (5000 per metre
     on disk, read back as the millimetres it was written from), the colour registered by stamp;

@@ -109,6 +109,45 @@ def test_bad_files_are_one_line_errors(tmp_path, capsys, text, fragment):
     assert rc == 2 and fragment in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize("text, sets, message", [
+    ("[navigator.mpc]\nhorizon = 2.5\n", [], "navigator.mpc.horizon: expected a whole number, got 2.5"),
+    ("[shield]\nnope = 1\n", [], "shield.nope: unknown key; ShieldConfig has no field 'nope'"),
+    ("[planner]\nx = 1\n", [], "planner.x: unknown section 'planner'"),
+    ("[dodt.kalman]\nq_pos = 'abc'\n", [], "dodt.kalman.q_pos: expected a number"),
+    ("[moving_rule]\nmin_speed = 3.0\n", ["moving_rule.max_speed=2.0"],
+     "moving_rule.min_speed, moving_rule.max_speed: MovingTrackRule: need 0 <= min_speed <= max_speed"),
+    ("[episode]\nframe_latency = -1\n", [], "episode.frame_latency: -1 is not"),
+], ids=["type", "unknown key", "unknown section", "dodt value", "checked together", "section"])
+def test_an_error_in_the_config_file_starts_with_its_path(tmp_path, capsys, text, sets, message):
+    f = tmp_path / "cfg.toml"
+    f.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        build(f, sets)
+    assert str(e.value).startswith(f"{f}: {message}")
+    rc = main(["run", "corridor", "--out", str(tmp_path / "o"), "--config", str(f),
+               *[x for s in sets for x in ("--set", s)]])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith(f"dodt-nav: error: {f}: {message}") and err.count("\n") == 1
+
+
+def test_an_error_in_a_set_that_overrides_the_file_names_no_file(tmp_path):
+    f = tmp_path / "cfg.toml"
+    f.write_text("[navigator.mpc]\nhorizon = 2.5\n")
+    with pytest.raises(ConfigError, match=r"^navigator.mpc.horizon: expected a whole number, got 3.5"):
+        build(f, ["navigator.mpc.horizon=3.5"])
+    f.write_text("[shield]\na_brake = 3.0\n")
+    with pytest.raises(ConfigError, match=r"^shield.nope: unknown key"):
+        build(f, ["shield.nope=1"])
+
+
+def test_a_config_file_that_is_not_utf8_is_a_one_line_error(tmp_path, capsys):
+    f = tmp_path / "cfg.toml"
+    f.write_bytes("[shield]\na_brake = 3.0  # caf\u00e9\n".encode("latin-1"))
+    rc = main(["run", "corridor", "--out", str(tmp_path / "o"), "--config", str(f)])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{f}: not a UTF-8 text file (byte 0xe9" in err and err.count("\n") == 1
+
+
 def test_an_option_and_its_key_together_are_refused(tmp_path, capsys):
     rc = main(["run", "corridor", "--out", str(tmp_path / "o"), "--map", "truth", "--set", "episode.static_map=depth"])
     assert rc == 2 and "--map and episode.static_map" in capsys.readouterr().err

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from experiments.episode import EpisodeConfig
-from experiments.sweep import RESULTS, SweepError, parse_seeds, read_results, run_sweep, wilson
+from experiments.sweep import RESULTS, SweepError, junit, parse_seeds, read_results, run_sweep, wilson
 
 # A 320x240 camera with the D435i's field of view (intrinsics scaled from 640x480) keeps episodes cheap.
 CAMERA = """
@@ -339,6 +339,27 @@ def _junit_cases(path):
     suite = ET.parse(path).getroot()
     assert suite.tag == "testsuite"
     return suite, suite.findall("testcase")
+
+
+def test_junit_escapes_names_and_messages():
+    """Scenario and perception names (a file path, a plug-in's module:Class) and failure details are text,
+    whatever they hold: the XML parses back to them."""
+    name, mode = 'a<b & "c" \'d\'', "x&y.py:Near<DODT>"
+    agg = {"scenario": name, "perception": mode, "per_seed": [
+        {"seed": 0, "success": True, "collisions": 0, "failure_reason": None, "faults": []},
+        {"seed": 3, "success": False, "collisions": 1, "failure_reason": "collision", "faults": ["<&\">"]}]}
+    detail = {"collisions": [{"with": "wall & <door>"}], "min_clearance": None, "time_to_goal": None, "sim_time": 1.5}
+    text = junit(agg, {0: {"sim_time": 4.0}, 3: detail})
+    assert text.startswith('<?xml version="1.0" encoding="UTF-8"?>\n')
+    suite = ET.fromstring(text.encode())
+    assert (suite.get("name"), suite.get("tests"), suite.get("failures"), suite.get("errors")) == (
+        f"dodt-nav sweep {name} {mode}", "2", "1", "0")
+    cases = suite.findall("testcase")
+    assert [(c.get("classname"), c.get("name"), c.get("time")) for c in cases] == [
+        (f"{name}.{mode}", "seed_0000", "4.0"), (f"{name}.{mode}", "seed_0003", "1.5")]
+    assert cases[0].find("failure") is None
+    failure = cases[1].find("failure")
+    assert failure.get("message") == 'collision: 1 collision(s) (<&">)' and json.loads(failure.text) == detail
 
 
 @pytest.mark.slow
