@@ -267,10 +267,11 @@ def parse_set(text: str) -> tuple[str, Any]:
 
 
 def build(sections: Mapping[str, Any], config_file: str | Path | None = None, sets: typing.Iterable[str] = (),
-          check: Check | None = None) -> Settings:
+          check: Check | None = None, absent: Mapping[str, str] | None = None) -> Settings:
     """Settings from a TOML file and ``--set`` assignments (after the file, in order), each key and value
     checked now against its section's default configuration in ``sections`` (name -> dataclass instance)
-    and by ``check``: a ConfigError naming the key (and the file, for a key the file set)."""
+    and by ``check``: a ConfigError naming the key (and the file, for a key the file set). ``absent``: why
+    a known section is not available in this run (name -> reason), for its error message."""
     pairs = [(k, v, config_file) for k, v in read_file(config_file)] if config_file else []
     pairs += [(*parse_set(s), None) for s in sets]
     by_section: dict[str, dict[str, Any]] = {s: {} for s in sections}
@@ -279,7 +280,9 @@ def build(sections: Mapping[str, Any], config_file: str | Path | None = None, se
         section, _, rest = key.partition(".")
         prefix = f"{where}: " if where else ""
         if section not in by_section:
-            raise ConfigError(f"{prefix}{key}: unknown section {section!r}; sections: {', '.join(sections)}")
+            why = (absent or {}).get(section)
+            raise ConfigError(f"{prefix}{key}: {why}" if why else
+                              f"{prefix}{key}: unknown section {section!r}; sections: {', '.join(sections)}")
         if not rest or rest.count(".") >= MAX_KEY_DEPTH:
             raise ConfigError(f"{prefix}{key}: expected {section}.<field>")
         d = by_section[section]

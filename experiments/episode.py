@@ -35,8 +35,8 @@ from experiments.follower import TrajectoryFollower
 from experiments.guards import PerceptionGuard, PlannerGuard, planner_telemetry
 from experiments.plugins import is_spec
 from experiments.provenance import source
-from experiments.registry import (DEFAULT_PLANNER, behind_shield, configured, make_perception, make_planner, perception_sections,
-                                  planner_label, planner_sections)
+from experiments.registry import (DEFAULT_PLANNER, behind_shield, configured, make_perception, make_planner,
+                                  perception_sections, planner_label, planner_sections, plugin_sections)
 from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
 from planner.visibility import SeenSpace
 from planner.voxel_map import MapConfig, VoxelMap
@@ -145,7 +145,8 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
             if shield:
                 planner = behind_shield(planner, world.vehicle.radius, settings)
                 labels["planner"] = f"shield+{labels['planner']}"
-        used = {"episode": cfg, **planner_sections(planner), **perception_sections(perc)}
+        used = {"episode": cfg, **planner_sections(planner), **perception_sections(perc),
+                **plugin_sections(perception, spec, settings)}
         loop = _Loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame, labels, timer)
         startup = time.perf_counter() - t_wall
         summary = loop.run(used, settings)

@@ -79,14 +79,24 @@ def settings_for(config_file=None, sets=(), perception: str = "dodt", planner: s
     """Settings from ``--config`` and ``--set``, every key and value checked now (ConfigError; PluginError
     for a plug-in spec that does not load)."""
     sections = sections_for(perception, planner)
-    settings = build(sections, config_file, sets, _check)
-    for name in PLUGIN_SECTIONS:
-        if settings.section(name) and name not in sections:
-            spec = perception if name == "perception" else planner
+    absent = {}
+    for name, spec in (("planner", planner), ("perception", perception)):
+        if name not in sections:
             who = f"the {name} plug-in {spec}" if is_spec(spec) else f"the built-in {name} {spec!r}"
-            raise ConfigError(f"{name}.{settings.section(name)[0][0]}: {who} declares no configuration "
-                              f"(a plug-in's config_class)")
-    return settings
+            absent[name] = f"{who} declares no configuration of its own (a plug-in's config_class)"
+    return build(sections, config_file, sets, _check, absent)
+
+
+def plugin_sections(perception, planner, settings: Settings) -> dict:
+    """The configurations of the plug-ins among ``perception`` and ``planner`` (specs; objects have
+    none) that declare one, by section, as they are built with ``settings``."""
+    out = {}
+    for name, spec in (("planner", planner), ("perception", perception)):
+        if isinstance(spec, str) and is_spec(spec):
+            cls = config_class(spec)
+            if cls is not None:
+                out[name] = configured(settings, name, cls())
+    return out
 
 
 def configured(settings: Settings, section: str, default):
@@ -127,7 +137,7 @@ def make_perception(spec: str, settings: Settings = Settings(), learned_detector
 
 def perception_sections(perception) -> dict:
     """The configuration a perception module runs with, by section: ``dodt`` for a module holding a DODT,
-    ``moving_rule`` for the DODT modes, ``oracle`` for the oracle modes, ``perception`` for a plug-in's."""
+    ``moving_rule`` for the DODT modes, ``oracle`` for the oracle modes (a plug-in's own: plugin_sections)."""
     out = {}
     dodt = getattr(perception, "dodt", None)
     cfg = getattr(dodt, "cfg", None)
@@ -137,9 +147,6 @@ def perception_sections(perception) -> dict:
         out["moving_rule"] = perception.moving_rule
     if isinstance(perception, OraclePerception):
         out["oracle"] = perception.cfg
-    own = getattr(perception, "plugin_config", None)
-    if own is not None:
-        out["perception"] = own
     return out
 
 
@@ -182,16 +189,11 @@ def behind_shield(planner, robot_radius: float, settings: Settings = Settings())
 
 
 def planner_sections(planner) -> dict:
-    """The configuration a planner runs with, by section."""
+    """The configuration a planner runs with, by section: ``shield`` and ``navigator`` (a plug-in's own:
+    plugin_sections)."""
     out = {}
     if isinstance(planner, PassiveSafetyShield):
         out["shield"] = planner.cfg
-        inner = planner.planner
-        if isinstance(inner, MPCPlanner):
-            out["navigator"] = inner.cfg
-    else:
-        inner = planner
-    own = getattr(inner, "plugin_config", None)
-    if own is not None:
-        out["planner"] = own
+        if isinstance(planner.planner, MPCPlanner):
+            out["navigator"] = planner.planner.cfg
     return out
