@@ -108,7 +108,7 @@ def cmd_run(args) -> int:
     out = output_folder(args.out)
     viewer = None
     if args.viz == "live":
-        from experiments.viz import LiveViewer
+        from experiments.live_viewer import LiveViewer
 
         viewer = LiveViewer(corridor=sc.corridor, goal=sc.drone.goal)
     try:
@@ -132,7 +132,7 @@ def cmd_run(args) -> int:
           f"{s['sim_time']:.1f} s simulated in {tm['wall_s']:.1f} s ({tm['real_time_factor']}x real time)")
     print(f"wrote {args.out}/summary.json and {args.out}/log.jsonl.gz")
     if args.viz == "html":
-        from experiments.viz import build_replay_html
+        from experiments.replay_html import build_replay_html
 
         html = build_replay_html(out / "log.jsonl.gz", out / "replay.html")
         print(f"wrote {html} ({html.stat().st_size / 1e6:.1f} MB; opens offline in a browser)")

@@ -56,7 +56,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_replay(args) -> int:
-    from experiments.viz import build_replay_html
+    from experiments.replay_html import build_replay_html
 
     out = Path(args.out) if args.out else Path(args.log).with_name("replay.html")
     writable_file(out, "--out")
