@@ -20,6 +20,7 @@ import meshcat.geometry as g
 import numpy as np
 import umsgpack
 from meshcat.animation import Animation
+from scipy.spatial.transform import Rotation
 
 from experiments.episode_log import map_snapshots, read_log
 from experiments.meshcat_scene import (ARROW, DYNAMIC, EXECUTED, GLOBAL_PATH, PERSON, PLANNED, STATIC, TRAIL_S,
@@ -222,7 +223,8 @@ def _replay_animation(vis, records: list[dict], frames: list[dict], fps: float, 
                 if kind == "dynamic":
                     v = np.asarray(tr["velocity"], float)
                     yaw, speed = math.atan2(v[1], v[0]), max(float(np.hypot(v[0], v[1])), 1e-3)
-                    key(f"{node}/arrow", "quaternion", "quaternion", [0, 0, math.sin(yaw / 2), math.cos(yaw / 2)], k)
+                    heading = Rotation.from_euler("z", yaw).as_quat().tolist()  # [x, y, z, w], as three.js
+                    key(f"{node}/arrow", "quaternion", "quaternion", heading, k)
                     key(f"{node}/arrow", "scale", "vector3", [round(speed, 3), 1, 1], k)
             for slot in set(range(pool.n)) - set(slots.values()):
                 visible(f"tracks/{kind}/{slot}", False, k)
