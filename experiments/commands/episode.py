@@ -137,7 +137,7 @@ def cmd_run(args) -> int:
         html = build_replay_html(out / "log.jsonl.gz", out / "replay.html")
         print(f"wrote {html} ({html.stat().st_size / 1e6:.1f} MB; opens offline in a browser)")
     if args.plots:
-        from experiments.plots import plot_episode
+        from experiments.episode_plots import plot_episode
 
         files = plot_episode(out / "log.jsonl.gz", out)
         print("wrote " + ", ".join(str(f) for f in files))

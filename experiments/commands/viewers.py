@@ -84,7 +84,8 @@ def cmd_collisions(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    from experiments.plots import plot_episode, plot_sweep
+    from experiments.episode_plots import plot_episode
+    from experiments.sweep_plots import plot_sweep
 
     src = Path(args.source)
     out = Path(args.out or (src if src.is_dir() else src.parent))

@@ -1,4 +1,5 @@
-"""experiments.plots: episode and sweep figures are valid, non-blank PNGs drawn from real logs and results."""
+"""experiments.episode_plots, sweep_plots and runtime_plots: episode and sweep figures are valid, non-blank
+PNGs drawn from real logs and results."""
 import copy
 import gzip
 import json
@@ -9,8 +10,10 @@ import pytest
 
 from experiments.episode import EpisodeConfig, run_episode
 from experiments.episode_log import read_log
-from experiments.plots import (EPISODE_FILES, SWEEP_FILES, _main, match_tracks_to_people, plot_episode,
-                               plot_runtime_table, plot_sweep)
+from experiments.cli import main
+from experiments.episode_plots import EPISODE_FILES, episode_runtime_rows, match_tracks_to_people, plot_episode
+from experiments.runtime_plots import plot_runtime_table, runtime_table_figure
+from experiments.sweep_plots import SWEEP_FILES, plot_sweep
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -127,8 +130,6 @@ def test_perception_error_says_why_when_there_is_nothing_to_score(oracle_run, tm
 
 
 def test_runtime_figure_has_three_modules_from_the_log(oracle_run):
-    from experiments.plots import episode_runtime_rows
-
     run, _ = oracle_run
     rows = episode_runtime_rows(read_log(run / "log.jsonl.gz"))
     assert [r[0] for r in rows] == ["perception (oracle) per frame", "map update", "planner solve"]
@@ -172,8 +173,6 @@ def _legend_clashes(fig, legend) -> list[str]:
 
 @pytest.mark.parametrize("paper", [False, True])
 def test_runtime_legend_covers_no_label_title_or_data(paper):
-    from experiments.plots import runtime_table_figure
-
     rows = [("perception (oracle) per frame (n=90)", 1.2, 2.0), ("map update (n=90)", 3.1, 4.0),
             ("planner solve (n=30)", 9.0, 14.5)]
     if paper:
@@ -299,8 +298,8 @@ def test_missing_and_wrong_inputs_raise_clear_errors(tmp_path):
     assert not (tmp_path / "o").exists()  # nothing written on a failed call
 
 
-def test_module_entry_point_reports_errors_in_one_line(tmp_path, capsys):
-    assert _main(["episode", str(tmp_path / "missing"), str(tmp_path / "o")]) == 2
+def test_plot_command_reports_errors_in_one_line(tmp_path, capsys):
+    assert main(["plot", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and "missing" in err and len(err.strip().splitlines()) == 1
-    assert _main(["bogus"]) == 2
+    assert err.startswith("dodt-nav: error: ") and "missing" in err and len(err.strip().splitlines()) == 1
+    assert main(["plot"]) == 2
