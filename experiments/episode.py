@@ -22,6 +22,7 @@ import numpy as np
 from dodt.geometry import wrap_angle
 from experiments.environment import environment
 from experiments.episode_log import EpisodeLog, MapChanges, r4
+from experiments.episode_metrics import summarize_log
 from experiments.config import Settings
 from experiments.perception_modes import PerceptionModule, config_sections, make_perception
 from experiments.plugins import DEFAULT_PLANNER, is_spec, make_planner
@@ -332,7 +333,7 @@ def _loop(sc, seed, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeCo
 
     log.add({"k": "end", "t": round(world.time, 5), "reason": reason, "reached_goal": reason == "goal",
              "time_to_goal": None if time_to_goal is None else round(time_to_goal, 5)})
-    summary = log.summarize()
+    summary = summarize_log(log.finish())
     summary["map_voxels_occupied"] = int(vmap.occupied_count())
     if config:
         summary["config"] = config

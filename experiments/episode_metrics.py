@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.episode_log import iter_log
 from experiments.fault import at_fault, classify
 
 
@@ -29,8 +30,6 @@ def timing_stats(values) -> dict:
 
 def summarize_log(path: Path) -> dict:
     """The metrics of the episode log at ``path``, read one record at a time."""
-    from experiments.episode_log import iter_log
-
     return summarize(iter_log(path))
 
 
