@@ -2,9 +2,9 @@
 
 ``plot_episode(log, out_dir)`` writes ``topdown.png`` (corridor, static obstacles, the drone's path,
 people's true paths with time marks, perception's dynamic tracks, collisions, start and goal),
-``clearance.png`` (distance to the nearest person and static obstacle over time, collisions
-marked), ``perception_error.png`` (position and velocity error of dynamic tracks matched to
-people, per person) and ``runtime.png`` (perception, map update and planner solve milliseconds,
+``clearance.png`` (distance to the nearest person, static obstacle and structure over time,
+collisions marked, the periods near the start and goal shaded), ``perception_error.png``
+(position and velocity error of dynamic tracks matched to people, per person) and ``runtime.png`` (perception, map update and planner solve milliseconds,
 laid out like the paper's Table II). File names are fixed; the same input gives the same PNG.
 
 The perception-error matching here is a viewer's rule, looser than the benchmark's
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.episode_log import read_log
-from experiments.episode_metrics import timing_stats
+from experiments.episode_metrics import END_ZONE_RADIUS, end_zones, in_end_zone, timing_stats
 from experiments.figures import COLLISION_COLOR, new_figure, save_figure, show_message
 from experiments.runtime_plots import plot_runtime_table
 
@@ -27,6 +27,7 @@ from experiments.runtime_plots import plot_runtime_table
 PERSON_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive",
                  "tab:cyan")
 TRACK_COLOR = "0.45"
+STRUCTURE_COLOR = "tab:brown"  # the corridor's walls, floor and ceiling in clearance.png
 
 EPISODE_FILES = ("topdown.png", "clearance.png", "perception_error.png", "runtime.png")
 
@@ -173,8 +174,14 @@ def plot_topdown(log, out_png, *, mark_every: float = 2.0) -> Path:
 
 
 def plot_clearance(log, out_png) -> Path:
-    """Distance to the nearest person and static obstacle over time, collisions marked."""
-    records = _load_records(log)
+    """Distance to the nearest person, static obstacle and structure over time, collisions marked."""
+    return save_figure(clearance_figure(_load_records(log)), Path(out_png))
+
+
+def clearance_figure(records: list[dict]):
+    """The figure ``plot_clearance`` saves, not yet drawn: the clearances of the state records over time,
+    with the periods near the start or the goal, which the summary's structure clearance leaves out
+    (experiments.episode_metrics.END_ZONE_RADIUS), shaded."""
     h = records[0]
     states = [r for r in records if r["k"] == "s"]
     collisions = [r for r in records if r["k"] == "collision"]
@@ -182,11 +189,19 @@ def plot_clearance(log, out_png) -> Path:
     if not states:
         show_message(ax, "no state records in the log")
         ax.set_title(f"{_title(h)}: clearance")
-        return save_figure(fig, Path(out_png))
+        return fig
     t = np.array([s["t"] for s in states])
     c = np.array([s["c"] for s in states], dtype=float)
+    zones = end_zones(h)
+    near = np.array([in_end_zone(s["p"], zones) for s in states])
+    edges = np.flatnonzero(np.diff(np.r_[0, near.astype(int), 0]))  # each run of periods near an end: [i0, i1)
+    for n, (i0, i1) in enumerate(zip(edges[::2], edges[1::2])):
+        ax.axvspan(t[i0], t[min(i1, len(t) - 1)], color="0.9", lw=0, zorder=0,
+                   label=f"within {END_ZONE_RADIUS:g} m of start or goal: structure not in the summary"
+                   if n == 0 else None)
     ax.plot(t, c[:, 1], "-", color="tab:blue", lw=1.5, label="nearest person")
     ax.plot(t, c[:, 0], "-", color="0.4", lw=1.2, label="nearest static obstacle")
+    ax.plot(t, c[:, 2], "-", color=STRUCTURE_COLOR, lw=1.2, label="nearest wall, floor or ceiling")
     ax.axhline(0.0, color="k", lw=0.8)
     for i, col in enumerate(collisions):
         ax.axvline(col["t"], color=COLLISION_COLOR, lw=1.5, ls="--",
@@ -199,16 +214,16 @@ def plot_clearance(log, out_png) -> Path:
                 textcoords="offset points", fontsize=7, color="tab:blue")
     # The simulator reports clearances only up to a cap (sim.world.CLEARANCE_CAP): a plateau at the
     # top is "at least this far", say so.
-    top = float(np.nanmax(c[:, :2]))
-    if np.mean(np.isclose(c[:, :2], top)) > 0.05:
+    top = float(np.nanmax(c[:, :3]))
+    if np.mean(np.isclose(c[:, :3], top)) > 0.05:
         ax.axhline(top, color="0.6", lw=0.8, ls=":", label=f"reporting cap ({top:g} m: at least this far)")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("clearance [m]")
-    ax.set_ylim(min(-0.05, float(np.nanmin(c[:, :2])) - 0.05), top * 1.08 + 0.02)
+    ax.set_ylim(min(-0.05, float(np.nanmin(c[:, :3])) - 0.05), top * 1.08 + 0.02)
     ax.set_xlim(float(t[0]), float(t[-1]))
     ax.set_title(f"{_title(h)}: distance to the nearest obstacle")
-    ax.legend(fontsize=7, loc="lower left")
-    return save_figure(fig, Path(out_png))
+    fig.legend(fontsize=7, loc="outside lower center", ncol=2, frameon=False)  # under the axes: hides no line
+    return fig
 
 
 def match_tracks_to_people(records: list[dict], match_distance: float = 1.0) -> dict:

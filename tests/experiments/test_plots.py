@@ -11,7 +11,8 @@ import pytest
 from experiments.episode import EpisodeConfig, run_episode
 from experiments.episode_log import read_log
 from experiments.cli import main
-from experiments.episode_plots import EPISODE_FILES, episode_runtime_rows, match_tracks_to_people, plot_episode
+from experiments.episode_plots import (EPISODE_FILES, clearance_figure, episode_runtime_rows, match_tracks_to_people,
+                                      plot_episode)
 from experiments.runtime_plots import plot_runtime_table, runtime_table_figure
 from experiments.sweep_plots import SWEEP_FILES, plot_sweep
 
@@ -89,6 +90,28 @@ def test_topdown_and_clearance_mark_collisions_in_red_only_when_logged(oracle_ru
     assert red_pixels(top) > 200  # the big X
     assert red_pixels(clear) > 50  # the vertical line at the collision time
     assert_not_blank(top)
+
+
+def test_clearance_plots_structure_and_shades_what_the_summary_leaves_out(oracle_run):
+    run, summary = oracle_run
+    records = read_log(run / "log.jsonl.gz")
+    states = [r for r in records if r["k"] == "s"]
+    t = np.array([s["t"] for s in states])
+    c = np.array([s["c"] for s in states])
+    ax = clearance_figure(records).axes[0]
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    for label, col in (("nearest static obstacle", 0), ("nearest person", 1), ("nearest wall, floor or ceiling", 2)):
+        assert np.array_equal(lines[label].get_xdata(), t) and np.array_equal(lines[label].get_ydata(), c[:, col])
+    # The take-off, in front of the corridor's end wall, is shaded; the summary's structure clearance is the
+    # least of the periods after it, not the 0.24 m to the wall behind the drone at its start.
+    p, start = np.array([s["p"] for s in states]), records[0]["start"]
+    away = np.hypot(p[:, 0] - start[0], p[:, 1] - start[1]) > 1.0
+    assert not away[0] and away[-1]
+    (span,) = [patch for patch in ax.patches if "start or goal" in patch.get_label()]
+    x0, x1 = span.get_extents().transformed(ax.transData.inverted()).intervalx
+    assert x0 == pytest.approx(t[0]) and x1 == pytest.approx(t[np.argmax(away)])
+    assert c[0, 2] < 0.3
+    assert summary["min_clearance"]["structure"] == c[away, 2].min() > 0.5
 
 
 def test_perception_error_plots_matched_people_for_dodt(dodt_run, tmp_path):
