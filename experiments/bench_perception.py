@@ -25,7 +25,7 @@ from dodt.config import DepthConfig
 from dodt.pipeline import DODT, MODULES
 from dodt.presets import PRESETS, preset
 from experiments.perception_metrics import RECALL_BINS, PerceptionMetrics, bin_labels
-from experiments.plots import new_figure
+from experiments.figures import new_figure
 from sim import World, load_scenario
 from sim.trajectories import scenario_reference
 

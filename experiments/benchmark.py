@@ -23,11 +23,12 @@ import numpy as np
 
 from experiments.config import Settings
 from experiments.environment import distinct
-from sim import load_scenario
 from experiments.episode_config import EpisodeConfig
+from experiments.figures import new_figure, save_figure
 from experiments.registry import configured, planner_label
 from experiments.sweep import (RESULTS, SweepError, _append, _dist, _end_with_newline, _Progress, aggregate,
                                check_same_setup, describe_environment, read_results, run_tasks)
+from sim import load_scenario
 
 FAMILIES = ("corridor", "corridor4", "crossing", "head_on", "step_out", "overtaking", "static_clutter")
 MODES = ("dodt", "oracle", "static-only")
@@ -187,8 +188,6 @@ def markdown(report: dict) -> str:
 
 def plot_families(report: dict, out: Path) -> list[Path]:
     """One figure per family: the reported rates of every (people, perception) cell, with intervals."""
-    from experiments.plots import _save, new_figure
-
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     colors = {"success": "tab:green", "at_fault": "tab:red", "not_at_fault_only": "tab:orange",
@@ -209,5 +208,5 @@ def plot_families(report: dict, out: Path) -> list[Path]:
         ax.set_ylabel("% of episodes (95 % Wilson interval)")
         ax.set_title(f"{family}: {report['split']} split, {rows[0]['episodes']} seeds per cell", fontsize=9)
         ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.18))
-        paths.append(_save(fig, out / f"{family}.png", tight=True))
+        paths.append(save_figure(fig, out / f"{family}.png", tight=True))
     return paths

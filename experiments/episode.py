@@ -30,6 +30,7 @@ from experiments.config import Settings
 from experiments.environment import environment
 from experiments.episode_config import EpisodeConfig
 from experiments.episode_log import EpisodeLog
+from experiments.episode_metrics import summarize_log
 from experiments.episode_recorder import EpisodeRecorder
 from experiments.follower import TrajectoryFollower
 from experiments.guards import PerceptionGuard, PlannerGuard, planner_telemetry
@@ -286,7 +287,7 @@ class _Loop:
             rec.step(world, ref.position)
 
         rec.end(world.time, reason, time_to_goal)
-        summary = self.log.summarize()
+        summary = summarize_log(self.log.finish())
         summary["map_voxels_occupied"] = int(vmap.occupied_count())
         summary["perception_name"] = self.labels["perception_name"]
         summary["config"] = config

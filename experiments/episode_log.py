@@ -94,7 +94,8 @@ def map_snapshots(records) -> list[tuple[float, np.ndarray]]:
 
 class EpisodeLog:
     """Streams the records to a gzip JSON-lines file as they come. Without a path the file is a
-    temporary one, removed by ``close()`` (the episode's metrics are read from it before)."""
+    temporary one, removed by ``close()`` (the episode's metrics are read from it before:
+    ``experiments.episode_metrics.summarize_log(log.finish())``)."""
 
     def __init__(self, path: Path | None = None):
         self._tmp = None
@@ -116,12 +117,6 @@ class EpisodeLog:
             self._fh.close()
             self._fh = None
         return self.path
-
-    def summarize(self) -> dict:
-        """The episode's metrics (experiments.episode_metrics), read back from the finished file."""
-        from experiments.episode_metrics import summarize_log
-
-        return summarize_log(self.finish())
 
     def close(self) -> None:
         """Finishes the file; a temporary one is removed."""

@@ -5,6 +5,16 @@ perception times, real-time factor) live under ``timing`` so comparisons can lea
 The records are read in one pass, one at a time (``summarize_log`` reads the file): what is kept
 per record is one number (a step's length, a solve time), so the metrics of an hour's episode fit
 in a few megabytes.
+
+``min_clearance``: the least distance [m] from the drone's collision box to static obstacles
+(``static``), to people (``person``) and to the corridor's walls, floor and ceiling (``structure``)
+over the control periods, as the simulator measures them (exact below its 1 m reporting cap,
+sim.world.CLEARANCE_CAP; the cap itself means "at least this far"), and the least of the three
+(``overall``). ``structure`` leaves out the periods in which the drone is within ``END_ZONE_RADIUS``
+(horizontally) of its start or its goal: both sit in front of the corridor's end walls (0.5 m off
+in the shipped scenarios), and counted there the wall behind the drone at take-off would set it
+in every episode, whatever the flight. It is None when the drone never left those zones. A touch
+of any structure is a collision all the same (``collisions``).
 """
 from __future__ import annotations
 
@@ -15,7 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.episode_log import iter_log
 from experiments.fault import at_fault, classify
+
+END_ZONE_RADIUS = 1.0  # m, horizontal, around the start and the goal: structure clearance is not counted there
 
 
 def timing_stats(values) -> dict:
@@ -27,10 +40,18 @@ def timing_stats(values) -> dict:
             "p99": round(float(np.percentile(a, 99)), 3), "max": round(float(a.max()), 3)}
 
 
+def end_zones(header: dict) -> list[tuple[float, float]]:
+    """The (x, y) centres of the zones around an episode's start and goal (those its header gives)."""
+    return [(float(header[k][0]), float(header[k][1])) for k in ("start", "goal") if header.get(k) is not None]
+
+
+def in_end_zone(p, zones) -> bool:
+    """Whether position ``p`` lies within END_ZONE_RADIUS, horizontally, of one of ``zones`` (end_zones)."""
+    return any(math.hypot(p[0] - x, p[1] - y) <= END_ZONE_RADIUS for x, y in zones)
+
+
 def summarize_log(path: Path) -> dict:
     """The metrics of the episode log at ``path``, read one record at a time."""
-    from experiments.episode_log import iter_log
-
     return summarize(iter_log(path))
 
 
@@ -43,6 +64,7 @@ def summarize(records: Iterable[dict]) -> dict:
     """The metrics of an episode's records (a list, or an iterator over a log file), in one pass."""
     header = end = None
     n_states, last_state_t, prev = 0, None, None
+    zones, n_away = [], 0  # n_away: the states outside the end zones, those structure clearance counts
     steps = array("d")  # the length of every step of the path, summed at the end as numpy sums an array
     min_clear = [math.inf, math.inf, math.inf]
     statuses = {"plans": 0, "fallbacks": 0, "errors": 0}
@@ -59,8 +81,10 @@ def summarize(records: Iterable[dict]) -> dict:
                 dx, dy, dz = p[0] - prev[0], p[1] - prev[1], p[2] - prev[2]
                 steps.append(math.sqrt(dx * dx + dy * dy + dz * dz))
             prev = p
+            away = not in_end_zone(p, zones)
+            n_away += away
             for i, c in enumerate(r["c"][:3]):
-                if c < min_clear[i]:
+                if c < min_clear[i] and (i < 2 or away):
                     min_clear[i] = c
         elif k == "f":
             n_frames += 1
@@ -78,11 +102,13 @@ def summarize(records: Iterable[dict]) -> dict:
             end = r
         elif k == "header" and header is None:
             header = r
+            zones = end_zones(header)
     if header is None:
         raise ValueError("an episode's records start with its header")
 
     path_length = float(np.frombuffer(steps, dtype=float).sum()) if len(steps) else 0.0
-    min_clear = {k: (round(float(min_clear[i]), 4) if n_states else None)
+    counted = (n_states, n_states, n_away)
+    min_clear = {k: (round(float(min_clear[i]), 4) if counted[i] else None)
                  for i, k in enumerate(("static", "person", "structure"))}
     finite = [v for v in min_clear.values() if v is not None]
     min_clear["overall"] = min(finite) if finite else None

@@ -17,7 +17,8 @@ from dodt.pipeline import MODULES
 from dodt.presets import preset
 from experiments import bench_perception, sweep
 from experiments.environment import distinct
-from experiments.plots import plot_runtime_table, plot_sweep
+from experiments.runtime_plots import plot_runtime_table
+from experiments.sweep_plots import plot_sweep
 
 
 @dataclass(frozen=True)

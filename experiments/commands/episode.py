@@ -108,7 +108,7 @@ def cmd_run(args) -> int:
     out = output_folder(args.out)
     viewer = None
     if args.viz == "live":
-        from experiments.viz import LiveViewer
+        from experiments.live_viewer import LiveViewer
 
         viewer = LiveViewer(corridor=sc.corridor, goal=sc.drone.goal)
     try:
@@ -136,12 +136,12 @@ def cmd_run(args) -> int:
         print(f"error: the {module} failed {e['count']} times (first at t = {e['first_time']:.2f} s); the first "
               f"traceback is in {args.out}/errors.txt", file=sys.stderr)
     if args.viz == "html":
-        from experiments.viz import build_replay_html
+        from experiments.replay_html import build_replay_html
 
         html = build_replay_html(out / "log.jsonl.gz", out / "replay.html")
         print(f"wrote {html} ({html.stat().st_size / 1e6:.1f} MB; opens offline in a browser)")
     if args.plots:
-        from experiments.plots import plot_episode
+        from experiments.episode_plots import plot_episode
 
         files = plot_episode(out / "log.jsonl.gz", out)
         print("wrote " + ", ".join(str(f) for f in files))

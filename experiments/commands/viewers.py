@@ -56,7 +56,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_replay(args) -> int:
-    from experiments.viz import build_replay_html
+    from experiments.replay_html import build_replay_html
 
     out = Path(args.out) if args.out else Path(args.log).with_name("replay.html")
     writable_file(out, "--out")
@@ -84,7 +84,8 @@ def cmd_collisions(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    from experiments.plots import plot_episode, plot_sweep
+    from experiments.episode_plots import plot_episode
+    from experiments.sweep_plots import plot_sweep
 
     src = Path(args.source)
     out = Path(args.out or (src if src.is_dir() else src.parent))

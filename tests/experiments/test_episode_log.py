@@ -78,6 +78,28 @@ def test_metrics_from_the_file_in_one_pass_equal_those_of_the_records(tmp_path):
     assert from_list["min_clearance"]["person"] == pytest.approx(0.1, abs=1e-3)
 
 
+def _state(t, x, clearances):
+    return {"k": "s", "t": t, "p": [x, 0.0, 1.2], "v": [1.0, 0.0, 0.0], "r": [x, 0.0, 1.2], "c": clearances}
+
+
+def test_structure_clearance_leaves_out_the_zones_around_start_and_goal():
+    """Start and goal sit 0.5 m in front of the corridor's end walls: the wall behind the drone at take-off
+    is no close call, and the summary's structure clearance is what the flight came to."""
+    head = dict(HEADER, start=[0.5, 0.0, 1.2], goal=[15.5, 0.0, 1.2])
+    states = [_state(0.0, 0.5, [1.0, 1.0, 0.2449]),  # at the start: the end wall 0.24 m behind
+              _state(1.0, 1.4, [1.0, 1.0, 0.5]),  # still within 1 m of the start
+              _state(5.0, 6.0, [0.7, 0.9, 0.8]),  # mid-corridor, near a side wall
+              _state(9.0, 15.2, [1.0, 1.0, 0.55])]  # arriving at the goal, before its end wall
+    end = {"k": "end", "t": 9.0, "reason": "goal", "reached_goal": True, "time_to_goal": 9.0}
+    mc = summarize([head, *states, end])["min_clearance"]
+    assert mc == {"static": 0.7, "person": 0.9, "structure": 0.8, "overall": 0.7}
+    # A drone that never left the start's zone has no structure clearance to report.
+    mc = summarize([head, *states[:2], end])["min_clearance"]
+    assert mc == {"static": 1.0, "person": 1.0, "structure": None, "overall": 1.0}
+    # Records without a start or goal in their header leave nothing out.
+    assert summarize([HEADER, *states, end])["min_clearance"]["structure"] == 0.2449
+
+
 def test_metrics_of_a_long_log_need_no_memory_per_record(tmp_path):
     """Summarizing keeps one number per state (a step's length) and per timing, not the records."""
     def run(n):

@@ -1,4 +1,5 @@
-"""experiments.plots: episode and sweep figures are valid, non-blank PNGs drawn from real logs and results."""
+"""experiments.episode_plots, sweep_plots and runtime_plots: episode and sweep figures are valid, non-blank
+PNGs drawn from real logs and results."""
 import copy
 import gzip
 import json
@@ -9,8 +10,11 @@ import pytest
 
 from experiments.episode import EpisodeConfig, run_episode
 from experiments.episode_log import read_log
-from experiments.plots import (EPISODE_FILES, SWEEP_FILES, _main, match_tracks_to_people, plot_episode,
-                               plot_runtime_table, plot_sweep)
+from experiments.cli import main
+from experiments.episode_plots import (EPISODE_FILES, clearance_figure, episode_runtime_rows, match_tracks_to_people,
+                                      plot_episode)
+from experiments.runtime_plots import plot_runtime_table, runtime_table_figure
+from experiments.sweep_plots import SWEEP_FILES, plot_sweep
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -88,6 +92,28 @@ def test_topdown_and_clearance_mark_collisions_in_red_only_when_logged(oracle_ru
     assert_not_blank(top)
 
 
+def test_clearance_plots_structure_and_shades_what_the_summary_leaves_out(oracle_run):
+    run, summary = oracle_run
+    records = read_log(run / "log.jsonl.gz")
+    states = [r for r in records if r["k"] == "s"]
+    t = np.array([s["t"] for s in states])
+    c = np.array([s["c"] for s in states])
+    ax = clearance_figure(records).axes[0]
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    for label, col in (("nearest static obstacle", 0), ("nearest person", 1), ("nearest wall, floor or ceiling", 2)):
+        assert np.array_equal(lines[label].get_xdata(), t) and np.array_equal(lines[label].get_ydata(), c[:, col])
+    # The take-off, in front of the corridor's end wall, is shaded; the summary's structure clearance is the
+    # least of the periods after it, not the 0.24 m to the wall behind the drone at its start.
+    p, start = np.array([s["p"] for s in states]), records[0]["start"]
+    away = np.hypot(p[:, 0] - start[0], p[:, 1] - start[1]) > 1.0
+    assert not away[0] and away[-1]
+    (span,) = [patch for patch in ax.patches if "start or goal" in patch.get_label()]
+    x0, x1 = span.get_extents().transformed(ax.transData.inverted()).intervalx
+    assert x0 == pytest.approx(t[0]) and x1 == pytest.approx(t[np.argmax(away)])
+    assert c[0, 2] < 0.3
+    assert summary["min_clearance"]["structure"] == c[away, 2].min() > 0.5
+
+
 def test_perception_error_plots_matched_people_for_dodt(dodt_run, tmp_path):
     run, _ = dodt_run
     records = read_log(run / "log.jsonl.gz")
@@ -127,8 +153,6 @@ def test_perception_error_says_why_when_there_is_nothing_to_score(oracle_run, tm
 
 
 def test_runtime_figure_has_three_modules_from_the_log(oracle_run):
-    from experiments.plots import episode_runtime_rows
-
     run, _ = oracle_run
     rows = episode_runtime_rows(read_log(run / "log.jsonl.gz"))
     assert [r[0] for r in rows] == ["perception (oracle) per frame", "map update", "planner solve"]
@@ -172,8 +196,6 @@ def _legend_clashes(fig, legend) -> list[str]:
 
 @pytest.mark.parametrize("paper", [False, True])
 def test_runtime_legend_covers_no_label_title_or_data(paper):
-    from experiments.plots import runtime_table_figure
-
     rows = [("perception (oracle) per frame (n=90)", 1.2, 2.0), ("map update (n=90)", 3.1, 4.0),
             ("planner solve (n=30)", 9.0, 14.5)]
     if paper:
@@ -299,8 +321,8 @@ def test_missing_and_wrong_inputs_raise_clear_errors(tmp_path):
     assert not (tmp_path / "o").exists()  # nothing written on a failed call
 
 
-def test_module_entry_point_reports_errors_in_one_line(tmp_path, capsys):
-    assert _main(["episode", str(tmp_path / "missing"), str(tmp_path / "o")]) == 2
+def test_plot_command_reports_errors_in_one_line(tmp_path, capsys):
+    assert main(["plot", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and "missing" in err and len(err.strip().splitlines()) == 1
-    assert _main(["bogus"]) == 2
+    assert err.startswith("dodt-nav: error: ") and "missing" in err and len(err.strip().splitlines()) == 1
+    assert main(["plot"]) == 2

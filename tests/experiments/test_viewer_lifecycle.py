@@ -11,6 +11,7 @@ import sys
 
 import pytest
 
+from experiments.meshcat_server import start_meshcat_server
 from processes import alive, children, descendants, wait_for
 
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads the process table from /proc")
@@ -73,9 +74,7 @@ def test_the_live_viewer_server_ends_with_a_killed_run_and_frees_its_ports(tmp_p
 
 
 def test_a_server_that_does_not_start_in_time_is_stopped(monkeypatch):
-    from experiments import viz
-
     before = set(children(os.getpid(), b"meshcat"))
     with pytest.raises(RuntimeError, match="did not start"):
-        viz.start_meshcat_server(timeout=0.01)
+        start_meshcat_server(timeout=0.01)
     assert wait_for(lambda: not set(children(os.getpid(), b"meshcat")) - before, timeout=10)

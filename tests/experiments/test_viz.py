@@ -13,8 +13,10 @@ from PIL import Image
 
 from dodt.frames import CameraIntrinsics, SensorFrame
 from experiments.episode import EpisodeConfig, run_episode
-from experiments.viz import DRONE_RGB, FLOOR_RGB, LiveViewer, build_replay_html, start_meshcat_server, \
-    stop_meshcat_server
+from experiments.live_viewer import LiveViewer
+from experiments.meshcat_scene import DRONE_RGB, FLOOR_RGB
+from experiments.meshcat_server import start_meshcat_server, stop_meshcat_server
+from experiments.replay_html import build_replay_html
 from sim import load_scenario
 
 from headless_chromium import QUIET_FLAGS, _Pipe, screenshot
