@@ -36,8 +36,8 @@ step); every call only updates q, l, u and the values of A, warm-started from th
 solution shifted in time. Obstacle predictions are taken to start at the planning time t0.
 
 Modules: planner.mpc_config (MPCConfig), planner.mpc_qp (the QP's fixed structure), planner.mpc_rows
-(the obstacle half-spaces (4), (5)), planner.homotopy (the passing sides (4')), this one (the solve),
-planner.mpc_bench (the benchmark; ``bench_mpc`` is importable from here too).
+(the obstacle half-spaces (4), (5)), planner.homotopy (the passing sides (4')), this one (the solve);
+its benchmark is experiments.bench_mpc.
 """
 from __future__ import annotations
 
@@ -58,13 +58,6 @@ from planner.types import Trajectory
 __all__ = ["MPC", "MPCConfig", "MPCResult"]
 
 _OK = {osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE}
-
-
-def __getattr__(name):  # the benchmark imports this module, so it is loaded only when asked for
-    if name == "bench_mpc":
-        from planner.mpc_bench import bench_mpc
-        return bench_mpc
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True, eq=False)

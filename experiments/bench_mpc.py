@@ -1,4 +1,4 @@
-"""The MPC's receding-horizon benchmark (``python3 -m planner.mpc_bench``; the CLI's bench command)."""
+"""The MPC's receding-horizon benchmark (``python3 -m experiments.bench_mpc``; the CLI's ``bench planner``)."""
 from __future__ import annotations
 
 import numpy as np
