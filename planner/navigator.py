@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planner.fallback import brake_and_hold
+from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
 from planner.global_path import CostToGo, PathFollower, block_discs, grid_path
 from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
 from planner.mpc import MPC, MPCConfig
@@ -61,43 +61,6 @@ class NavigatorConfig:
 
 
 _HEADINGS = np.radians(np.arange(-180, 180, 5.0))  # the heading's choices
-# m, m/s, m/s^2: larger positions, velocities or accelerations are not a vehicle's (a position of 1e308 m,
-# finite, left a path of infinite length behind that failed the next plan); NaN compares false: refused too
-_PLAUSIBLE = 1e6
-
-
-def valid_input(inp: PlannerInput) -> bool:
-    """Whether a plan can be made from ``inp``: stamp, position, velocity, acceleration, goal and heading
-    finite (3,) values of a size some vehicle reaches (_PLAUSIBLE)."""
-    try:
-        return (all(np.shape(x) == (3,) and np.all(np.abs(np.asarray(x, dtype=float)) <= _PLAUSIBLE)
-                    for x in (inp.position, inp.velocity, inp.acceleration, inp.goal))
-                and abs(float(inp.stamp)) <= 1e9 and (inp.yaw is None or abs(float(inp.yaw)) <= 1e3))
-    except (TypeError, ValueError):
-        return False
-
-
-def invalid_input_stop(inp: PlannerInput, a_max: float) -> Trajectory:
-    """Brake and hold on what of ``inp`` is finite, status ``fallback:invalid_input``."""
-    return brake_and_hold(_finite_or(inp.stamp, 0.0), _vector_or_zero(inp.position), _vector_or_zero(inp.velocity),
-                          a_max=a_max, status="fallback:invalid_input")
-
-
-def _finite_or(x, default: float) -> float:
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return default
-    return x if math.isfinite(x) else default
-
-
-def _vector_or_zero(x) -> np.ndarray:
-    """x as a (3,) float vector (the fallback holds what is not finite), or zeros when it is not one."""
-    try:
-        a = np.asarray(x, dtype=float).reshape(3)
-    except (TypeError, ValueError):
-        return np.zeros(3)
-    return a
 
 
 class MPCPlanner:
@@ -264,7 +227,7 @@ class MPCPlanner:
         maneuver choice and MPC), not the MPC's alone (bench_mpc measures that).
 
         Never raises and always returns a finite trajectory: a stamp, position, velocity, acceleration,
-        goal or heading that is not finite, or whose size no vehicle reaches (_PLAUSIBLE), gives
+        goal or heading that is not finite, or whose size no vehicle reaches (fallback.valid_input), gives
         brake-and-hold (status ``fallback:invalid_input``) and leaves the planner as it was; an error
         inside gives brake-and-hold (``error:<type>``) and resets the planner, whose state the error may
         have left half updated."""

@@ -22,8 +22,7 @@ import cv2
 import numpy as np
 
 from planner.candidates import Candidates, backups, roll, target_velocities
-from planner.fallback import brake_and_hold
-from planner.navigator import invalid_input_stop, valid_input
+from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
 from planner.safety import check, in_the_way
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 
