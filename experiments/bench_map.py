@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from planner.voxel_map import MapConfig, VoxelMap
+from planner.map.voxel_map import MapConfig, VoxelMap
 
 
 def bench_update(n: int = 60) -> dict:

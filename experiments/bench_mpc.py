@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.mpc import MPC
-from planner.mpc_config import MPCConfig
+from planner.mpc.config import MPCConfig
+from planner.mpc.solver import MPC
 from planner.types import ObstaclePrediction
 
 

@@ -17,8 +17,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from planner.map.voxel_map import VoxelMap
 from planner.types import PlannerInput, Trajectory
-from planner.voxel_map import VoxelMap
 from sim.vehicle import load_vehicle
 
 

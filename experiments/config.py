@@ -3,10 +3,10 @@
 Sections and the configuration each one overrides:
 
 - ``episode``: experiments.episode.EpisodeConfig (``episode.plan_rate``, ``episode.duration``, ...);
-- ``shield``: planner.shield.ShieldConfig of the default planner (``shield.a_brake``);
-- ``navigator``: planner.navigator.NavigatorConfig of the default planner, with its nested sections
+- ``shield``: planner.shield.shield.ShieldConfig of the default planner (``shield.a_brake``);
+- ``navigator``: planner.nominal.navigator.NavigatorConfig of the default planner, with its nested sections
   (``navigator.cruise_speed``, ``navigator.mpc.horizon``, ``navigator.maneuvers.<field>``);
-- ``map``: planner.voxel_map.MapConfig of the episode's static map, after the episode sizes it to the
+- ``map``: planner.map.voxel_map.MapConfig of the episode's static map, after the episode sizes it to the
   scenario (``map.p_hit``);
 - ``dodt``: dodt.config.DODTConfig of the DODT perception modes, on top of the mode's preset
   (``dodt.kalman.q_pos``; dodt.config.override);
@@ -47,9 +47,9 @@ def _section_classes() -> dict[str, type]:
     from dodt.config import DODTConfig
     from experiments.episode import EpisodeConfig
     from experiments.perception_modes import MovingTrackRule, OracleConfig
-    from planner.navigator import NavigatorConfig
-    from planner.shield import ShieldConfig
-    from planner.voxel_map import MapConfig
+    from planner.map.voxel_map import MapConfig
+    from planner.nominal.navigator import NavigatorConfig
+    from planner.shield.shield import ShieldConfig
 
     return {"episode": EpisodeConfig, "shield": ShieldConfig, "navigator": NavigatorConfig, "map": MapConfig,
             "dodt": DODTConfig, "moving_rule": MovingTrackRule, "oracle": OracleConfig}

@@ -26,12 +26,12 @@ from experiments.config import Settings
 from experiments.perception_modes import PerceptionModule, config_sections, make_perception
 from experiments.plugins import DEFAULT_PLANNER, is_spec, make_planner
 from planner.fallback import brake_and_hold
-from planner.mpc import MPCConfig
-from planner.navigator import MPCPlanner, NavigatorConfig
-from planner.shield import PassiveSafetyShield, ShieldConfig
+from planner.map.visibility import SeenSpace
+from planner.map.voxel_map import MapConfig, VoxelMap
+from planner.mpc.config import MPCConfig
+from planner.nominal.navigator import MPCPlanner, NavigatorConfig
+from planner.shield.shield import PassiveSafetyShield, ShieldConfig
 from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
-from planner.visibility import SeenSpace
-from planner.voxel_map import MapConfig, VoxelMap
 from sim import World, load_scenario
 from sim.controller import Reference
 from sim.scenario import MAX_DURATION
@@ -62,7 +62,7 @@ class EpisodeConfig:
     frame_latency: int = 1
     render_process: bool = True
     seen_band: tuple[float, float] = (0.8, 1.6)  # m, world z: a ray crossing a floor cell at these heights saw
-    # nobody there (planner.visibility.SeenSpace; a person's torso)
+    # nobody there (planner.map.visibility.SeenSpace; a person's torso)
     launch_radius: float = 2.0  # m around the start that counts as seen free when the episode begins
     # the camera's renderer (sim.camera: auto, gl, pybullet, tiny); None: the scenario's. Changes the images
     # (gl and pybullet draw the same geometry, shaded differently), so outcomes are compared per renderer

@@ -23,7 +23,7 @@ def test_file_then_sets_in_order_last_wins(tmp_path):
 def test_sections_apply_to_their_configurations():
     from experiments.episode import EpisodeConfig, default_planner
     from experiments.perception_modes import make_perception
-    from planner.voxel_map import MapConfig
+    from planner.map.voxel_map import MapConfig
 
     s = build(None, ["shield.a_brake=3", "navigator.mpc.horizon=30", "navigator.cruise_speed=1.2", "map.p_hit=0.75",
                      "dodt.kalman.q_pos=0.02", "dodt.ensemble.detectors=[\"udepth\"]", "episode.plan_rate=5",

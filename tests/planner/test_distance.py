@@ -2,7 +2,7 @@
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from planner.distance import distance_to
+from planner.map.distance import distance_to
 
 
 def test_equals_scipy_bit_for_bit_on_random_grids():

@@ -1,12 +1,13 @@
-"""The maneuver layer (planner.maneuvers) and the cost-to-go field it scores progress with."""
+"""The maneuver layer (planner.nominal.maneuvers) and the cost-to-go field it scores progress with."""
 import math
 
 import numpy as np
 import pytest
 
-from planner.global_path import cost_to_go
-from planner.maneuvers import ManeuverConfig, ManeuverSelector, hypotheses, static_clearance, view_costs
-from planner.mpc import MPC, MPCConfig
+from planner.mpc.config import MPCConfig
+from planner.mpc.solver import MPC
+from planner.nominal.global_path import cost_to_go
+from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector, hypotheses, static_clearance, view_costs
 from planner.types import ObstaclePrediction
 
 RES = 0.1
@@ -258,7 +259,7 @@ def _random_case(seed):
 
 
 def _run_best(k, first, group=0, shared=0):
-    from planner.maneuvers import _best
+    from planner.nominal.maneuvers import _best
     cfg, parts = k["cfg"], np.empty(5)
     b, cost = _best(k["P"], k["A"], k["stop"], k["clear"], k["goal"], ORIGIN[0], ORIGIN[1], RES, k["O"], k["R"],
                     k["owner"], k["prior"], 3, k["gamma"], k["keep"], R_ROBOT, cfg.static_margin, cfg.dynamic_margin,

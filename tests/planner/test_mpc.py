@@ -1,8 +1,9 @@
-"""Behaviour of the linear MPC (planner/mpc.py): tracking, bounds, avoidance, fallback, warm start."""
+"""Behaviour of the linear MPC (planner/mpc/solver.py): tracking, bounds, avoidance, fallback, warm start."""
 import numpy as np
 import pytest
 
-from planner.mpc import MPC, MPCConfig
+from planner.mpc.config import MPCConfig
+from planner.mpc.solver import MPC
 from planner.types import ObstaclePrediction
 
 CFG = MPCConfig()

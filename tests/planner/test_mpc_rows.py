@@ -1,9 +1,9 @@
-"""The MPC's half-space rows (planner.mpc_rows: static_rows, dynamic_rows) against their definitions."""
+"""The MPC's half-space rows (planner.mpc.rows: static_rows, dynamic_rows) against their definitions."""
 import numpy as np
 import pytest
 
-from planner.mpc_config import MPCConfig
-from planner.mpc_rows import static_rows
+from planner.mpc.config import MPCConfig
+from planner.mpc.rows import static_rows
 
 
 def _planes_by_definition(cfg, c, pts, side, p0):
@@ -73,7 +73,7 @@ def _shifts_by_arrays(along, perp2, h, req):
 
 
 def test_compiled_shifts_equal_the_array_steps_bit_for_bit():
-    from planner.mpc_rows import _shifts
+    from planner.mpc.rows import _shifts
 
     rng = np.random.default_rng(0)
     for _ in range(200):
@@ -86,7 +86,7 @@ def test_compiled_shifts_equal_the_array_steps_bit_for_bit():
 
 
 def test_compiled_shifts_give_inf_where_twenty_steps_do_not_clear():
-    from planner.mpc_rows import _shifts
+    from planner.mpc.rows import _shifts
 
     along = np.array([0.9 * np.arange(-30, 31)])  # a chain of overlapping intervals both ways
     perp2 = np.zeros_like(along)
@@ -97,7 +97,7 @@ def test_compiled_shifts_give_inf_where_twenty_steps_do_not_clear():
 
 
 def test_compiled_row_filters_equal_the_boolean_masks():
-    from planner.mpc_rows import _inside, finite_rows
+    from planner.mpc.rows import _inside, finite_rows
 
     rng = np.random.default_rng(1)
     for _ in range(100):
@@ -135,7 +135,7 @@ def _dynamic_rows_by_definition(cfg, c, cand, p0, bias):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_dynamic_rows_give_the_definitions_floats(seed):
-    from planner.mpc_rows import dynamic_rows
+    from planner.mpc.rows import dynamic_rows
     cfg, rng = MPCConfig(), np.random.default_rng(seed)
     N = cfg.horizon
     for it in range(300):

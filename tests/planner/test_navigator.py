@@ -1,13 +1,13 @@
-"""The default planner (planner.navigator): path, maneuver choice, MPC and heading, through plan()."""
+"""The default planner (planner.nominal.navigator): path, maneuver choice, MPC and heading, through plan()."""
 import math
 
 import numpy as np
 import pytest
 
-from planner.mpc import MPCConfig
-from planner.navigator import MPCPlanner, NavigatorConfig
+from planner.map.voxel_map import MapConfig, VoxelMap
+from planner.mpc.config import MPCConfig
+from planner.nominal.navigator import MPCPlanner, NavigatorConfig
 from planner.types import ObstaclePrediction, PlannerInput
-from planner.voxel_map import MapConfig, VoxelMap
 
 R_ROBOT = 0.437
 GOAL = np.array([15.5, 0.0, 1.2])

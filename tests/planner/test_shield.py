@@ -1,4 +1,4 @@
-"""planner.shield: a plan is flown as it is while its commitment (followed for commit_time, then a stop) is
+"""planner.shield.shield: a plan is flown as it is while its commitment (followed for commit_time, then a stop) is
 safe; otherwise the shield flies a safe motion, the committed stop, or the hardest stop; it remembers
 people who leave the view, and never raises."""
 import math
@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from planner.shield import PassiveSafetyShield, ShieldConfig
+from planner.map.visibility import SeenSpace
+from planner.map.voxel_map import MapConfig, VoxelMap
+from planner.shield.shield import PassiveSafetyShield, ShieldConfig
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
-from planner.visibility import SeenSpace
-from planner.voxel_map import MapConfig, VoxelMap
 
 GOAL = np.array([14.0, 0.0, 1.2])
 FENCE = (np.array([0.0, -2.0]), np.array([15.0, 2.0]))

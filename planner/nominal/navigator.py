@@ -4,7 +4,7 @@ among sampled motions, the MPC refining it.
 Every call: (1) every ``path_period`` seconds, or sooner when the current path runs into newly
 occupied cells, an A* path to the goal on the map's column grid at the flight altitude, and the
 cost-to-go field the maneuvers score against (both cached on the map's version);
-(2) ``planner.maneuvers`` scores two-phase candidate motions against the goal, static clearance and
+(2) ``planner.nominal.maneuvers`` scores two-phase candidate motions against the goal, static clearance and
 several hypotheses of each moving obstacle's future, and the chosen one is the MPC's reference and the
 point its obstacle constraints are linearised at (without a map: a reference along the straight line
 to the goal at cruise speed);
@@ -21,9 +21,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
-from planner.global_path import CostToGo, PathFollower, block_discs, grid_path
-from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
-from planner.mpc import MPC, MPCConfig
+from planner.mpc.config import MPCConfig
+from planner.mpc.solver import MPC
+from planner.nominal.global_path import CostToGo, PathFollower, block_discs, grid_path
+from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
 from planner.types import PlannerInput, Trajectory
 
 
@@ -38,7 +39,7 @@ class NavigatorConfig:
     block_times: tuple[float, ...] = (0.0, 0.5, 1.0)  # s; moving obstacles block the path search here
     look_ahead: float = 2.0  # m along the path for the heading
     use_geofence: bool = True  # keep the plan inside PlannerInput.geofence (the corridor's walls) when given
-    # the maneuver layer (planner.maneuvers): picks how to pass moving obstacles and the MPC refines that motion
+    # the maneuver layer (planner.nominal.maneuvers): picks how to pass moving obstacles and the MPC refines that motion
     maneuvers: ManeuverConfig = field(default_factory=ManeuverConfig)
     guide_look_ahead: float = 1.5  # m along the path: the maneuvers' frame points at this point
     # With maneuvers the heading is chosen to keep in the camera's view both where the drone goes (the chosen

@@ -1,10 +1,10 @@
 """Passive safety as a constraint on any planner's plans (docs/planner.md).
 
-``PassiveSafetyShield`` wraps a planner (by default the maneuver + MPC planner of planner.navigator)
+``PassiveSafetyShield`` wraps a planner (by default the maneuver + MPC planner of planner.nominal.navigator)
 and checks every plan it makes before the drone flies it. What the drone commits to is the plan flown
 for ``commit_time`` and then a stop: replanned every 0.1 s, the commitment is extended as long as it
 stays safe, and if a replan fails the stop is what is left (FASTER's back-up trajectory). The check
-(planner.safety): the commitment keeps clear of static structure, of every place a tracked or
+(planner.shield.safety): the commitment keeps clear of static structure, of every place a tracked or
 remembered person could get to, unless the drone is at rest or moving away from the threat. When the plan's commitment is not safe, the shield flies the
 safe motion (a target velocity, then a stop) nearest to what the planner wanted; when none is safe,
 the last safe commitment from now on; when that no longer is, the least unsafe motion.
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from planner.candidates import Candidates, backups, roll, target_velocities
 from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
-from planner.safety import check, in_the_way
+from planner.shield.candidates import Candidates, backups, roll, target_velocities
+from planner.shield.safety import check, in_the_way
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 
 
@@ -58,7 +58,7 @@ class ShieldConfig:
     memory_merge: float = 1.0  # m: an obstacle reported this near a remembered one is that one again
     band: float = 0.5  # m: structure within this of the flight altitude counts
     # choosing an alternative: the one nearest the planner's velocity, plus w_way per metre its resting
-    # place lies in a walker's way over the way_look seconds after (planner.safety.in_the_way)
+    # place lies in a walker's way over the way_look seconds after (planner.shield.safety.in_the_way)
     w_way: float = 3.0
     way_look: float = 2.0
     hold_speed: float = 0.3  # m/s: stopping from slower than this holds a fixed point

@@ -1,4 +1,4 @@
-"""Settings of the linear MPC (planner.mpc); symbols as in that module's docstring."""
+"""Settings of the linear MPC (planner.mpc.solver); symbols as in that module's docstring."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -30,7 +30,7 @@ P and the sparsity pattern of A are fixed at construction (room for max_dynamic 
 step); every call only updates q, l, u and the values of A, warm-started from the previous
 solution shifted in time. Obstacle predictions are taken to start at the planning time t0.
 
-Modules: planner.mpc_config (MPCConfig), planner.mpc_qp (the QP's fixed structure), planner.mpc_rows
+Modules: planner.mpc.config (MPCConfig), planner.mpc.qp (the QP's fixed structure), planner.mpc.rows
 (the obstacle half-spaces (4), (5)), this one (the solve); its benchmark is experiments.bench_mpc.
 """
 from __future__ import annotations
@@ -43,12 +43,12 @@ import numpy as np
 import osqp
 
 from planner.fallback import brake_and_hold
-from planner.mpc_config import MPCConfig
-from planner.mpc_qp import QPLayout, rollout
-from planner.mpc_rows import dynamic_candidates, dynamic_rows, finite_rows, static_rows
+from planner.mpc.config import MPCConfig
+from planner.mpc.qp import QPLayout, rollout
+from planner.mpc.rows import dynamic_candidates, dynamic_rows, finite_rows, static_rows
 from planner.types import Trajectory
 
-__all__ = ["MPC", "MPCConfig", "MPCResult"]
+__all__ = ["MPC", "MPCResult"]
 
 _OK = {osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE}
 
@@ -170,7 +170,7 @@ class MPC:
         """One receding-horizon plan from (position, velocity) at time t0; see the module docstring.
         geofence: (lo (2,), hi (2,)) the known walls of the flight area in x, y (a corridor's), or None;
         every planned position keeps geofence_margin inside it, on the static slack (6).
-        guide: (N, 3) positions of a motion chosen beforehand (planner.maneuvers), or None: the obstacles
+        guide: (N, 3) positions of a motion chosen beforehand (planner.nominal.maneuvers), or None: the obstacles
         are linearised at it instead of at the previous plan, and the passing sides are the guide's (no
         tie-break offset), and no half-space asks for more room than the guide
         keeps (its right-hand side is capped at the guide's own value): the decision is the guide's, the MPC

@@ -1,4 +1,4 @@
-"""Half-space rows of the MPC's obstacle constraints (planner.mpc's module docstring, (4) and (5)).
+"""Half-space rows of the MPC's obstacle constraints (planner.mpc.solver's module docstring, (4) and (5)).
 
 Moving obstacles: tangent planes of each predicted ellipsoid at the radial projection of the
 linearisation point c_k, after the tie-break offset that picks the passing side. Occupied voxels:
@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
-from planner.mpc_config import MPCConfig
+from planner.mpc.config import MPCConfig
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -1,7 +1,7 @@
 """Maneuver selection: a few thousand short candidate motions scored against the static map, the goal
 and several futures of every moving obstacle; the best one guides the MPC.
 
-Why: the linear MPC (planner.mpc) linearises each obstacle at its previous plan, so whether it passes
+Why: the linear MPC (planner.mpc.solver) linearises each obstacle at its previous plan, so whether it passes
 a person left or right, waits, backs off or goes on is inherited from that plan and a tie-break rule,
 and the plan can switch sides from one replan to the next. That choice is combinatorial, and a sampled
 set of whole motions, each scored over the horizon, makes it well (sampling-based local planners and
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from planner.distance import distance_to
+from planner.map.distance import distance_to
 from planner.types import ObstaclePrediction
 
 
