@@ -21,10 +21,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
+from planner.map.clearance import static_clearance
 from planner.mpc.config import MPCConfig
 from planner.mpc.solver import MPC
 from planner.nominal.global_path import CostToGo, PathFollower, block_discs, grid_path
-from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
+from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector
+from planner.nominal.view import ViewTerm
 from planner.types import PlannerInput, Trajectory
 
 
@@ -208,7 +210,7 @@ class MPCPlanner:
         return p_ref, v_ref
 
     def _view_term(self, inp: PlannerInput, path_yaw: float | None) -> ViewTerm:
-        """The heading rule's bearings (config) as a maneuvers.ViewTerm over this call's obstacles."""
+        """The heading rule's bearings (config) as a view.ViewTerm over this call's obstacles."""
         c = self.cfg
         steps = lambda t, lo: min(max(int(round(t / c.mpc.dt)), lo), c.mpc.horizon)  # noqa: E731
         times = np.asarray(c.watch_times, float)

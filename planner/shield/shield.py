@@ -18,10 +18,11 @@ import math
 import time
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
+from planner.map.clearance import static_clearance
+from planner.map.distance import opencv_distance
 from planner.shield.candidates import Candidates, backups, roll, target_velocities
 from planner.shield.safety import check, in_the_way
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
@@ -65,12 +66,6 @@ class ShieldConfig:
     hold_reanchor: float = 0.3  # m: a hold point farther than this from the drone is set anew
 
 
-def distance_to(mask: np.ndarray, res: float) -> np.ndarray:
-    """(nx, ny) metres from each cell's centre to the nearest cell of ``mask`` (exact Euclidean; OpenCV's
-    transform, several times faster than scipy's here)."""
-    return cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(float) * res
-
-
 class PassiveSafetyShield:
     """Implements planner.types.Planner around another planner (module docstring)."""
 
@@ -82,7 +77,6 @@ class PassiveSafetyShield:
     def reset(self) -> None:
         self.planner.reset()
         self._fields = None
-        self._fence = None  # (clearance key, grid shape, cells outside the geofence)
         self._committed: Candidates | None = None  # the last safe commitment, as one motion
         self._committed_t0 = 0.0
         self._tracks: dict[int, tuple[float, float, ObstaclePrediction]] = {}  # id -> first, last stamp, last
@@ -108,25 +102,11 @@ class PassiveSafetyShield:
         f = self._fields
         if f is not None and f["key"] == key and np.array_equal(f["raw"], raw):
             return f  # the map changed elsewhere than in this band
-        solid = raw
-        if inp.geofence is not None:
-            solid = solid | self._outside(inp, occ, key, raw.shape)
         res = occ.cfg.resolution
-        clear = distance_to(solid, res) - 0.5 * res if solid.any() else np.full(solid.shape, 1e3)
-        self._fields = {"key": key, "raw": raw, "clear": np.ascontiguousarray(clear), "solid": solid,
-                        "origin": occ.xy_origin, "res": res}
+        clear = static_clearance(raw, res, occ.xy_origin, inp.geofence, distance=opencv_distance)
+        self._fields = {"key": key, "raw": raw, "clear": np.ascontiguousarray(clear), "origin": occ.xy_origin,
+                        "res": res}
         return self._fields
-
-    def _outside(self, inp: PlannerInput, occ, key, shape) -> np.ndarray:
-        """(nx, ny) bool: the cells whose centres lie outside the geofence (kept while key and shape hold)."""
-        if self._fence is not None and self._fence[0] == key and self._fence[1] == shape:
-            return self._fence[2]
-        centres = occ.cell_to_world(np.argwhere(np.ones(shape, bool))).reshape(shape + (2,))
-        lo, hi = np.asarray(inp.geofence[0], float), np.asarray(inp.geofence[1], float)
-        out = ((centres[..., 0] < lo[0]) | (centres[..., 0] > hi[0]) | (centres[..., 1] < lo[1])
-               | (centres[..., 1] > hi[1]))
-        self._fence = (key, shape, out)
-        return out
 
     def _people(self, inp: PlannerInput):
         """Reach discs of the reported and the remembered moving obstacles: C0, Vp (M, 2), R0, G (M,)."""
