@@ -89,6 +89,20 @@ class PassiveSafetyShield:
     def path(self):
         return getattr(self.planner, "path", None)
 
+    @property
+    def brake_accel(self) -> float:
+        """m/s^2: the deceleration the shield stops with (its committed stop, and the stop on invalid input
+        or an error): ShieldConfig.a_brake."""
+        return self.cfg.a_brake
+
+    def telemetry(self) -> dict:
+        """What the latest plan saw, for a log: ``path``, the wrapped planner's global path (K, 2) in world
+        x, y, or None; ``threats``, the people's reach discs the plan was checked against, (M, 3) x, y,
+        radius (None when that plan checked none: no map, or its input was invalid); ``forgotten``, where
+        the people it stopped remembering at that plan were predicted and why, [(x, y, reason)] with
+        reasons from FORGET_REASONS."""
+        return {"path": self.path, "threats": self.threats, "forgotten": list(self.forgotten)}
+
     # ------------------------------------------------------------------ what could be where
 
     def _clearance(self, inp: PlannerInput) -> dict:
