@@ -8,14 +8,14 @@ is walked voxel by voxel (Amanatides & Woo) from its endpoint back toward the ca
 the endpoint and a miss in each voxel crossed; then each touched voxel takes one log-odds step. A ray
 stops at a voxel already crossed this frame (ref), so converging rays are not walked twice; ours limits
 "already crossed" to rays of the same small pixel block, since the reference rule (any ray of the frame)
-leaves about half of the frustum uncarved in a frame (rays of distant pixels diverge after sharing a
-voxel). Boxes of dynamic obstacles free their region (grown by a margin, from the map's floor up) and,
-for a few frames, keep depth points inside it from being inserted: a walker leaves no trail. Ours: a
-voxel is left alone by both rules when it has been occupied for ``static_after`` updates, or when it
-was occupied for ``protect_before`` updates already when a dynamic region first came over it (it stays
-so while regions keep covering it). The reference frees everything in the region, so a person walking
-past a shelf or a pillar erases its near face from the map, and then a drone flies into it; a walker's
-own voxels are as young as its box when the box first covers them.
+leaves much of the frustum uncarved in a frame (rays of distant pixels diverge after sharing a voxel;
+docs/experiments.md). Boxes of dynamic obstacles free their region (grown by a margin, from the map's
+floor up) and, for a few frames, keep depth points inside it from being inserted: a walker leaves no
+trail. Ours: a voxel is left alone by both rules when it has been occupied for ``static_after`` updates,
+or when it was occupied for ``protect_before`` updates already when a dynamic region first came over it
+(it stays so while regions keep covering it). The reference frees everything in the region, so a person
+walking past a shelf or a pillar erases its near face from the map, and then a drone flies into it; a
+walker's own voxels are as young as its box when the box first covers them.
 Voxel (i, j, k) covers origin + res * [i, i + 1) per axis. No result depends on the wall clock.
 """
 from __future__ import annotations
@@ -51,7 +51,7 @@ class MapConfig:
     raycast_max: float = 5.0  # m, longest ray; longer ones are shortened and end free, ref raycast_max_length
     skip_pixel: int = 2  # every n-th row and column, ref map yaml depth_skip_pixel
     # ours: a ray stops at a voxel crossed by an earlier ray of its own ray_bundle_px-square pixel block
-    # this frame; 0 = any earlier ray of the frame (ref), which leaves about half the frustum uncarved
+    # this frame; 0 = any earlier ray of the frame (ref), which leaves much of the frustum uncarved
     ray_bundle_px: int = 8
     margin: int = 2  # px border skipped, ref map yaml depth_filter_margin
     local_update_range: tuple[float, float, float] = (5.0, 5.0, 5.0)  # m around the camera, ref

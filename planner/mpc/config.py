@@ -43,7 +43,7 @@ class MPCConfig:
     # metres of static slack, so a squeeze from moving obstacles is not resolved by flying into a side wall; ours
     iterations: int = 1  # linearise-and-solve rounds per call
     warm_start: bool = True  # start OSQP from the previous solution shifted in time (False: from zero)
-    rho: float = 0.5  # OSQP initial ADMM step (adaptive after); ours, fewer iterations on bench_mpc than 0.1
+    rho: float = 0.5  # OSQP initial ADMM step (adaptive after); ours (docs/experiments.md)
     eps_abs: float = 1e-3  # OSQP tolerances; ours
     eps_rel: float = 1e-3
     max_iter: int = 4000
