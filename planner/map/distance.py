@@ -4,8 +4,11 @@ exact_distance: Meijster, Roerdink and Hesselink's two-pass algorithm on integer
 compiled: the squared distance from each cell to the nearest feature cell is exact, so its square root
 (correctly rounded) is the same float as scipy.ndimage.distance_transform_edt's, which takes the root of
 the same integer sum.
-opencv_distance: OpenCV's precise Euclidean transform (DIST_MASK_PRECISE), computed in float32: within a
-few float32 rounding steps of the exact distance, not always the correctly rounded one.
+opencv_distance: OpenCV's precise Euclidean transform (DIST_MASK_PRECISE), computed in float32. Through
+Intel IPP (OpenCV's default where it is built in) it is within a float32 rounding step or so of the exact
+distance, not always the correctly rounded one, and not always the same floats from call to call on the
+same input (opencv/opencv#24082); without IPP (cv2.ipp.setUseIPP(False)) it is exact_distance rounded to
+float32.
 """
 from __future__ import annotations
 
