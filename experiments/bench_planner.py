@@ -22,8 +22,8 @@ from experiments.episode import run_episode
 from experiments.episode_config import EpisodeConfig
 from experiments.guards import planner_telemetry
 from experiments.registry import DEFAULT_PLANNER, make_planner
+from planner.map.voxel_map import VoxelMap
 from planner.types import PlannerInput, Trajectory
-from planner.voxel_map import VoxelMap
 from sim.vehicle import load_vehicle
 
 

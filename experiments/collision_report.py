@@ -19,7 +19,7 @@ lay inside a disc the planner kept its plan from, and ``known_for``: for how lon
 known only a moment before was too close to stop for, whatever the planner; one known long before
 points at the planner. Where the plan records also say whom the planner stopped remembering (the
 shield's ``forgot``), ``forgot`` is the reason it last dropped a person predicted within ``lost_match``
-metres of this one in the window (planner.shield.FORGET_REASONS), and ``forgot_s`` how long before the
+metres of this one in the window (planner.shield.shield.FORGET_REASONS), and ``forgot_s`` how long before the
 contact: a person forgotten as "seen_free" a moment before the contact was where the prediction was not.
 """
 from __future__ import annotations

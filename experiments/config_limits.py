@@ -205,7 +205,7 @@ LIMITS: dict[str, Limit] = {
     "episode.launch_radius": _real(0.0, 50.0),  # m; 0: nothing seen at the start
     "episode.renderer": _one_of(*RENDERER_CHOICES, optional=True),
     # ---- shield (planner.shield.ShieldConfig). Its motions take ceil(commit_time / dt) + ceil(v_max /
-    # (a_brake dt)) + 2 steps (planner.candidates.horizon_steps), for 1 + len(speeds) x directions motions:
+    # (a_brake dt)) + 2 steps (planner.shield.candidates.horizon_steps), for 1 + len(speeds) x directions motions:
     # dt, a_brake, speeds and directions are bounded so that those arrays stay within some 100 MB
     "shield.dt": _real(0.02, 1.0),  # s
     "shield.commit_time": _real(0.0, 10.0),  # s
@@ -233,7 +233,7 @@ LIMITS: dict[str, Limit] = {
     "shield.way_look": _SPAN,
     "shield.hold_speed": _SPEED0,
     "shield.hold_reanchor": _real(0.0, 10.0),  # m
-    # ---- navigator (planner.navigator.NavigatorConfig)
+    # ---- navigator (planner.nominal.navigator.NavigatorConfig)
     "navigator.cruise_speed": _SPEED,
     "navigator.goal_decel": _ACCEL,
     "navigator.band_half_height": _MARGIN,
@@ -245,11 +245,11 @@ LIMITS: dict[str, Limit] = {
     "navigator.use_geofence": BOOL,
     "navigator.guide_look_ahead": _real(0.0, 50.0, lo_open=True),  # m along the path
     "navigator.heading_look_time": _real(0.0, 10.0, lo_open=True),  # s
-    "navigator.camera_half_fov": _real(0.0, math.pi, lo_open=True),  # rad
+    "navigator.camera_half_fov": _real(0.0, math.pi, lo_open=True, optional=True),  # rad; none: the camera's
     "navigator.fov_margin": _real(0.0, math.pi),  # rad
     "navigator.watch_range": _RANGE,
     "navigator.watch_times": _real(0.0, 10.0, length=(1, 16)),  # s ahead
-    # ---- navigator.maneuvers (planner.maneuvers.ManeuverConfig). Candidates: (len(along) x len(across))^2,
+    # ---- navigator.maneuvers (planner.nominal.maneuvers.ManeuverConfig). Candidates: (len(along) x len(across))^2,
     # each of mpc.horizon steps: 12 x 12 targets give 20736
     "navigator.maneuvers.along": _real(-10.0, 10.0, length=(1, 12)),  # m/s
     "navigator.maneuvers.across": _real(-10.0, 10.0, length=(1, 12)),  # m/s
@@ -283,7 +283,7 @@ LIMITS: dict[str, Limit] = {
     "navigator.maneuvers.band_half_height": _MARGIN,
     "navigator.maneuvers.near_goal": _RANGE,
     "navigator.maneuvers.approach_range": _RANGE,
-    # ---- navigator.mpc (planner.mpc_config.MPCConfig)
+    # ---- navigator.mpc (planner.mpc.config.MPCConfig)
     "navigator.mpc.horizon": _whole(1, 200),  # steps
     "navigator.mpc.dt": _real(0.01, 1.0),  # s
     "navigator.mpc.v_max_xy": _real(0.1, 10.0),  # m/s; above backoff, or the QP's bounds cross
@@ -313,13 +313,6 @@ LIMITS: dict[str, Limit] = {
     "navigator.mpc.relative_side": BOOL,
     "navigator.mpc.geofence_margin": _MARGIN,
     "navigator.mpc.geofence_scale": _real(0.0, 1000.0),
-    "navigator.mpc.homotopy_obstacles": _whole(0, 6),  # 2^M QPs per call
-    "navigator.mpc.homotopy_range": _RANGE,
-    "navigator.mpc.homotopy_trigger": _MARGIN,  # m of slack
-    "navigator.mpc.homotopy_max_iter": _whole(1, 1_000_000),
-    "navigator.mpc.homotopy_eps": _real(0.0, 1.0, lo_open=True),
-    "navigator.mpc.homotopy_hysteresis": _FRACTION,
-    "navigator.mpc.homotopy_hysteresis_abs": _WEIGHT,
     "navigator.mpc.iterations": _whole(1, 20),
     "navigator.mpc.warm_start": BOOL,
     "navigator.mpc.rho": _real(1e-6, 1e6),  # OSQP's ADMM step, > 0
@@ -328,7 +321,7 @@ LIMITS: dict[str, Limit] = {
     "navigator.mpc.max_iter": _whole(1, 1_000_000),
     "navigator.mpc.max_prim_res": _real(0.0, 10.0),
     "navigator.mpc.backoff": _real(0.0, 0.05),  # m/s, m; below v_max's least
-    # ---- map (planner.voxel_map.MapConfig; the probabilities' order among each other is its own check)
+    # ---- map (planner.map.voxel_map.MapConfig; the probabilities' order among each other is its own check)
     "map.resolution": _RESOLUTION,
     "map.origin": _triple(-1000.0, 1000.0),  # m, world
     "map.size": _triple(0.0, 200.0, lo_open=True),  # m per axis

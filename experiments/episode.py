@@ -38,9 +38,9 @@ from experiments.plugins import is_spec
 from experiments.provenance import source
 from experiments.registry import (DEFAULT_PLANNER, behind_shield, configured, make_perception, make_planner,
                                   perception_sections, planner_label, planner_sections, plugin_sections)
+from planner.map.visibility import SeenSpace
+from planner.map.voxel_map import MapConfig, VoxelMap
 from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
-from planner.visibility import SeenSpace
-from planner.voxel_map import MapConfig, VoxelMap
 from sim import World, load_scenario
 from sim.static_grid import static_occupancy
 

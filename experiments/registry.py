@@ -24,10 +24,10 @@ from experiments.episode_config import EpisodeConfig
 from experiments.perception_modes import (MODES, NOISY_ORACLE_VELOCITY_NOISE, DODTPerception, MovingTrackRule,
                                           OracleConfig, OraclePerception, StaticOnlyPerception)
 from experiments.plugins import PluginError, config_class, is_spec, load_plugin
-from planner.mpc import MPCConfig
-from planner.navigator import MPCPlanner, NavigatorConfig
-from planner.shield import PassiveSafetyShield, ShieldConfig
-from planner.voxel_map import MapConfig
+from planner.map.voxel_map import MapConfig
+from planner.mpc.config import MPCConfig
+from planner.nominal.navigator import MPCPlanner, NavigatorConfig
+from planner.shield.shield import PassiveSafetyShield, ShieldConfig
 
 DEFAULT_PLANNER = "default"
 DEFAULT_PLANNER_LABEL = "PassiveSafetyShield"  # what summaries record for the default planner

@@ -1,9 +1,12 @@
-"""The safe fallback of every planner: brake at full deceleration along -velocity, then hold."""
+"""The safe fallback of every planner: brake at full deceleration along -velocity, then hold; and the
+check of a planner's input that decides when nothing but that fallback can be planned."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
-from planner.types import Trajectory
+from planner.types import PlannerInput, Trajectory
 
 
 def brake_and_hold(t0: float, position, velocity, a_max: float = 2.0, dt: float = 0.1, horizon: int = 25,
@@ -42,3 +45,42 @@ def brake_and_hold(t0: float, position, velocity, a_max: float = 2.0, dt: float 
         P, V, A = np.repeat(P[:1], horizon + 1, axis=0), np.zeros((horizon + 1, 3)), np.zeros((horizon, 3))
     return Trajectory(t0=float(t0) if np.isfinite(t0) else 0.0, dt=dt, positions=P,
                       velocities=V, accelerations=A, status=status)
+
+
+# m, m/s, m/s^2: larger positions, velocities or accelerations are not a vehicle's (a position of 1e308 m,
+# finite, left a path of infinite length behind that failed the next plan); NaN compares false: refused too
+_PLAUSIBLE = 1e6
+
+
+def valid_input(inp: PlannerInput) -> bool:
+    """Whether a plan can be made from ``inp``: stamp, position, velocity, acceleration, goal and heading
+    finite (3,) values of a size some vehicle reaches (_PLAUSIBLE)."""
+    try:
+        return (all(np.shape(x) == (3,) and np.all(np.abs(np.asarray(x, dtype=float)) <= _PLAUSIBLE)
+                    for x in (inp.position, inp.velocity, inp.acceleration, inp.goal))
+                and abs(float(inp.stamp)) <= 1e9 and (inp.yaw is None or abs(float(inp.yaw)) <= 1e3))
+    except (TypeError, ValueError):
+        return False
+
+
+def invalid_input_stop(inp: PlannerInput, a_max: float) -> Trajectory:
+    """Brake and hold on what of ``inp`` is finite, status ``fallback:invalid_input``."""
+    return brake_and_hold(_finite_or(inp.stamp, 0.0), _vector_or_zero(inp.position), _vector_or_zero(inp.velocity),
+                          a_max=a_max, status="fallback:invalid_input")
+
+
+def _finite_or(x, default: float) -> float:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return default
+    return x if math.isfinite(x) else default
+
+
+def _vector_or_zero(x) -> np.ndarray:
+    """x as a (3,) float vector (the fallback holds what is not finite), or zeros when it is not one."""
+    try:
+        a = np.asarray(x, dtype=float).reshape(3)
+    except (TypeError, ValueError):
+        return np.zeros(3)
+    return a

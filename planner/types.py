@@ -135,10 +135,10 @@ class PlannerInput:
     acceleration: np.ndarray  # (3,) last commanded acceleration
     goal: np.ndarray  # (3,)
     obstacles: tuple[ObstaclePrediction, ...]  # moving obstacles
-    occupancy: object | None = None  # a planner.voxel_map.VoxelMap (static map), or None
+    occupancy: object | None = None  # a planner.map.voxel_map.VoxelMap (static map), or None
     yaw: float | None = None  # current heading of the vehicle (and its forward camera) [rad]
     geofence: tuple[np.ndarray, np.ndarray] | None = None  # known walls of the flight area: (lo, hi) in x, y [m]
-    seen: object | None = None  # a planner.visibility.SeenSpace: when the camera last saw each floor cell free
+    seen: object | None = None  # a planner.map.visibility.SeenSpace: when the camera last saw each floor cell free
 
 
 class Planner(Protocol):

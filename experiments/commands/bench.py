@@ -127,10 +127,9 @@ def cmd_bench(args) -> int:
         bench_perception.run(Path(args.out), list(range(args.seeds or 1)), scenarios, configs, duration, rates=rates)
         return 0
     if args.what == "planner":
-        from planner.mpc import bench_mpc
-        from planner.voxel_map import bench_update
-
         from experiments import bench_planner
+        from experiments.bench_map import bench_update
+        from experiments.bench_mpc import bench_mpc
 
         bench_update()
         for seed in range(3):

@@ -86,7 +86,7 @@ def test_the_examples_read_the_episode_context():
 
     from context_factory import example_context
     from planner.types import ObstaclePrediction, PlannerInput
-    from planner.voxel_map import MapConfig, VoxelMap
+    from planner.map.voxel_map import MapConfig, VoxelMap
 
     planner = _load("custom_planner").StraightLine()
     vmap = VoxelMap(MapConfig(origin=(0.0, -2.0, 0.0), size=(10.0, 4.0, 3.0)))

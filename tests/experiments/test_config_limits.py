@@ -113,7 +113,7 @@ USED = [
     ("shield.a_brake", 3.0), ("shield.a_brake", 2.5), ("shield.a_emergency", 6.5), ("shield.away_angle", 2.356),
     ("shield.memory", 5.0), ("shield.memory_min_age", 0.2), ("shield.drone_radius", 0.43),
     ("navigator.mpc.horizon", 30), ("navigator.mpc.horizon", 20), ("navigator.mpc.dynamic_margin", 0.15),
-    ("navigator.mpc.homotopy_obstacles", 0), ("navigator.mpc.robot_radius", 0.43),
+    ("navigator.mpc.robot_radius", 0.43), ("navigator.camera_half_fov", 0.759),
     ("navigator.block_times", [0.0, 1.0]), ("navigator.cruise_speed", 1.2), ("navigator.watch_range", 4.5),
     ("navigator.watch_range", 2.0), ("navigator.watch_range", 0.1),
     ("navigator.maneuvers.along", [-0.5, 0.0, 0.5, 1.0, 1.5, 2.0]),

@@ -1,5 +1,5 @@
 """A walker grazing a pillar, seen by a hovering drone with oracle perception: the map's dynamic clearing
-frees the walker's voxels but keeps the pillar's near face (planner.voxel_map, protect_before)."""
+frees the walker's voxels but keeps the pillar's near face (planner.map.voxel_map, protect_before)."""
 from dataclasses import replace
 
 import numpy as np
@@ -8,7 +8,7 @@ import pytest
 from conftest import make_scenario
 from experiments.episode import map_config_for
 from experiments.perception_modes import OraclePerception
-from planner.voxel_map import VoxelMap
+from planner.map.voxel_map import VoxelMap
 from sim import World
 from sim.controller import Reference
 

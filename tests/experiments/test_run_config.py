@@ -24,7 +24,7 @@ def test_file_then_sets_in_order_last_wins(tmp_path):
 
 def test_sections_apply_to_their_configurations():
     from experiments.episode_config import EpisodeConfig
-    from planner.voxel_map import MapConfig
+    from planner.map.voxel_map import MapConfig
 
     s = build(None, ["shield.a_brake=3", "navigator.mpc.horizon=30", "navigator.cruise_speed=1.2", "map.p_hit=0.75",
                      "dodt.kalman.q_pos=0.02", "dodt.ensemble.detectors=[\"udepth\"]", "episode.plan_rate=5",
@@ -74,7 +74,7 @@ def test_values_checked_together_can_be_set_in_any_order(sets):
     (["shield.a_brake=fast"], "shield.a_brake: expected a number, got 'fast'"),
     (["shield.speeds=1.0"], "shield.speeds: expected a list"),
     (["episode.static_map=xyz"], "episode.static_map: 'xyz' is not one of depth, truth"),
-    (["planner.x=1"], "planner.x: unknown section 'planner'"),
+    (["planner.x=1"], "planner.x: the built-in planner 'default' declares no configuration"),
     (["dodt.kalman.q_pos=abc"], "dodt.kalman.q_pos: expected a number"),
     (["dodt.kalman.nope=1"], "dodt.kalman.nope: unknown key; KalmanConfig has no field 'nope'"),
     (["map.p_hit=2.0"], "map.p_hit: 2.0 is not a number in (0.5, 1)"),
@@ -112,7 +112,7 @@ def test_bad_files_are_one_line_errors(tmp_path, capsys, text, fragment):
 @pytest.mark.parametrize("text, sets, message", [
     ("[navigator.mpc]\nhorizon = 2.5\n", [], "navigator.mpc.horizon: expected a whole number, got 2.5"),
     ("[shield]\nnope = 1\n", [], "shield.nope: unknown key; ShieldConfig has no field 'nope'"),
-    ("[planner]\nx = 1\n", [], "planner.x: unknown section 'planner'"),
+    ("[planner]\nx = 1\n", [], "planner.x: the built-in planner 'default' declares no configuration"),
     ("[dodt.kalman]\nq_pos = 'abc'\n", [], "dodt.kalman.q_pos: expected a number"),
     ("[moving_rule]\nmin_speed = 3.0\n", ["moving_rule.max_speed=2.0"],
      "moving_rule.min_speed, moving_rule.max_speed: MovingTrackRule: need 0 <= min_speed <= max_speed"),

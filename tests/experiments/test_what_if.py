@@ -133,6 +133,6 @@ def _context_with_map():
     from dataclasses import replace as _replace
 
     from context_factory import example_context
-    from planner.voxel_map import VoxelMap
+    from planner.map.voxel_map import VoxelMap
 
     return _replace(example_context(), static_map=VoxelMap())

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from planner.global_path import PathFollower, grid_path
+from planner.nominal.global_path import PathFollower, grid_path
 
 
 def _grid(nx=60, ny=30):
@@ -72,7 +72,7 @@ def test_follower_projection_and_sampling():
 
 
 def test_bucketed_field_equals_the_heap_search_bit_for_bit():
-    from planner.global_path import _field, _search
+    from planner.nominal.global_path import _field, _search
 
     rng = np.random.default_rng(0)
     for _ in range(200):
@@ -84,7 +84,7 @@ def test_bucketed_field_equals_the_heap_search_bit_for_bit():
 
 
 def test_cost_to_go_cache_gives_the_fresh_field_as_cells_change():
-    from planner.global_path import CostToGo, cost_to_go
+    from planner.nominal.global_path import CostToGo, cost_to_go
 
     rng = np.random.default_rng(2)
     b = _grid(40, 20)

@@ -1,12 +1,14 @@
-"""The maneuver layer (planner.maneuvers) and the cost-to-go field it scores progress with."""
+"""The maneuver layer (planner.nominal.maneuvers) and the cost-to-go field it scores progress with."""
 import math
 
 import numpy as np
 import pytest
 
-from planner.global_path import cost_to_go
-from planner.maneuvers import ManeuverConfig, ManeuverSelector, hypotheses, static_clearance, view_costs
-from planner.mpc import MPC, MPCConfig
+from planner.map.clearance import static_clearance
+from planner.mpc.config import MPCConfig
+from planner.mpc.solver import MPC
+from planner.nominal.global_path import cost_to_go
+from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector, hypotheses
 from planner.types import ObstaclePrediction
 
 RES = 0.1
@@ -181,37 +183,6 @@ def test_the_mpc_follows_the_guides_side():
 
 # --- view term ----------------------------------------------------------------------------------------
 
-HEADINGS = np.radians(np.arange(-180, 180, 5.0))
-HALF_VIEW = 0.759 - 0.15
-
-
-def _line(p0, v, n=25, dt=0.1):
-    return np.asarray(p0, float) + np.outer(dt * np.arange(1, n + 1), v)
-
-
-def _view(P, watch, fallback=math.nan):
-    """view_costs of candidates P (C, 25, 2) from (0, 0), watching points (O, 2, 2) at 0.5 s and 1 s."""
-    return view_costs(np.ascontiguousarray(P, dtype=float), np.zeros(2), 10, 1.0, fallback,
-                      np.asarray(watch, float).reshape(-1, 2, 2), np.array([5, 10]), 3.0, HALF_VIEW, HEADINGS, 0.05)
-
-
-def test_view_cost_is_nil_when_one_heading_sees_the_motion_and_the_walker_and_grows_when_none_can():
-    ahead = [[[2.0, 0.3], [2.0, 0.3]]]  # a walker standing ahead, a little left
-    behind = [[[-1.0, 0.0], [-1.0, 0.0]]]  # one standing behind the start
-    fwd = _line([0, 0], [1.5, 0.0])[None]
-    cost, arg = _view(fwd, ahead)
-    assert cost[0] == pytest.approx(0.0) and abs(HEADINGS[arg[0]]) < HALF_VIEW
-    cost_b, _ = _view(fwd, behind)  # flying on away from him: motion and walker 180 degrees apart
-    slow = _line([0, 0], [0.2, 0.0])[None]  # hardly moving: the motion weighs less and he is nearer
-    cost_s, _ = _view(slow, behind, fallback=0.0)
-    assert cost_b[0] > 0.5 and cost_s[0] > 0.0
-    none, idx = _view(fwd[:, :, :] * 0.0 + 0.01, np.zeros((0, 2, 2)))  # no motion, no fallback, nobody
-    assert none[0] == 0.0 and idx[0] == -1
-    far = [[[10.0, 5.0], [10.0, 5.0]]]  # beyond the watch range: only the motion counts
-    cost_f, arg_f = _view(fwd, far)
-    assert cost_f[0] == pytest.approx(0.0) and HEADINGS[arg_f[0]] == 0.0
-
-
 # --- the cost and its branch and bound -----------------------------------------------------------------
 
 def _costs_by_definition(P, A, stop, clear, goal, O, R, owner, prior, gamma, keep, cfg, r, goal_xy, r_goal, m_goal):
@@ -258,7 +229,7 @@ def _random_case(seed):
 
 
 def _run_best(k, first, group=0, shared=0):
-    from planner.maneuvers import _best
+    from planner.nominal.maneuvers import _best
     cfg, parts = k["cfg"], np.empty(5)
     b, cost = _best(k["P"], k["A"], k["stop"], k["clear"], k["goal"], ORIGIN[0], ORIGIN[1], RES, k["O"], k["R"],
                     k["owner"], k["prior"], 3, k["gamma"], k["keep"], R_ROBOT, cfg.static_margin, cfg.dynamic_margin,

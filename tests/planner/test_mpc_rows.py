@@ -1,9 +1,9 @@
-"""The MPC's half-space rows (planner.mpc_rows: static_rows, dynamic_rows) against their definitions."""
+"""The MPC's half-space rows (planner.mpc.rows: static_rows, dynamic_rows) against their definitions."""
 import numpy as np
 import pytest
 
-from planner.mpc_config import MPCConfig
-from planner.mpc_rows import static_rows
+from planner.mpc.config import MPCConfig
+from planner.mpc.rows import static_rows
 
 
 def _planes_by_definition(cfg, c, pts, side, p0):
@@ -73,7 +73,7 @@ def _shifts_by_arrays(along, perp2, h, req):
 
 
 def test_compiled_shifts_equal_the_array_steps_bit_for_bit():
-    from planner.mpc_rows import _shifts
+    from planner.mpc.rows import _shifts
 
     rng = np.random.default_rng(0)
     for _ in range(200):
@@ -86,7 +86,7 @@ def test_compiled_shifts_equal_the_array_steps_bit_for_bit():
 
 
 def test_compiled_shifts_give_inf_where_twenty_steps_do_not_clear():
-    from planner.mpc_rows import _shifts
+    from planner.mpc.rows import _shifts
 
     along = np.array([0.9 * np.arange(-30, 31)])  # a chain of overlapping intervals both ways
     perp2 = np.zeros_like(along)
@@ -97,7 +97,7 @@ def test_compiled_shifts_give_inf_where_twenty_steps_do_not_clear():
 
 
 def test_compiled_row_filters_equal_the_boolean_masks():
-    from planner.mpc_rows import _inside, finite_rows
+    from planner.mpc.rows import _inside, finite_rows
 
     rng = np.random.default_rng(1)
     for _ in range(100):
@@ -111,9 +111,9 @@ def test_compiled_row_filters_equal_the_boolean_masks():
         np.testing.assert_array_equal(_inside(q, lo, hi), q[np.all((q >= lo) & (q <= hi), axis=1)])
 
 
-def _dynamic_rows_by_definition(cfg, c, cand, p0, forced, bias):
+def _dynamic_rows_by_definition(cfg, c, cand, p0, bias):
     """(4) in numpy: the offset from each predicted centre to c_k (horizontal for a person spanning the
-    altitude band), tie-broken to at least the bias along its side (or the forced side), the point where
+    altitude band), tie-broken to at least the bias along its side, the point where
     it meets the ellipsoid, and the tangent plane there."""
     o = np.stack([e[2] for e in cand], axis=1)
     ax = np.stack([e[3] for e in cand], axis=1)
@@ -123,8 +123,6 @@ def _dynamic_rows_by_definition(cfg, c, cand, p0, forced, bias):
     d = (c[:, None, :] - o) * flat
     lat = np.sum(d * side, axis=-1)
     sgn = np.where(lat < 0, -1.0, 1.0)
-    if forced is not None:
-        sgn = np.where(forced != 0, forced, sgn)
     d = d + (sgn * np.maximum(np.abs(lat), cfg.side_bias if bias is None else bias) - lat)[..., None] * side
     away = (p0 - o) * flat
     away = np.where(np.linalg.norm(away, axis=-1, keepdims=True) > 1e-9, away, np.array([0.0, 1.0, 0.0]))
@@ -137,7 +135,7 @@ def _dynamic_rows_by_definition(cfg, c, cand, p0, forced, bias):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_dynamic_rows_give_the_definitions_floats(seed):
-    from planner.mpc_rows import dynamic_rows
+    from planner.mpc.rows import dynamic_rows
     cfg, rng = MPCConfig(), np.random.default_rng(seed)
     N = cfg.horizon
     for it in range(300):
@@ -150,9 +148,8 @@ def test_dynamic_rows_give_the_definitions_floats(seed):
                 ax[:, 2] = 5.0  # spanning the altitude band
             sd = rng.normal(0, 1, 3)
             cand.append((0.0, j, o, ax, sd / np.linalg.norm(sd)))
-        forced = None if it % 2 else rng.choice([-1.0, 0.0, 1.0], len(cand))
         bias = (None, 0.0, 0.3)[it % 3]
-        got = dynamic_rows(cfg, c, cand, p0, forced, bias)
-        want = _dynamic_rows_by_definition(cfg, c, cand, p0, forced, bias)
+        got = dynamic_rows(cfg, c, cand, p0, bias)
+        want = _dynamic_rows_by_definition(cfg, c, cand, p0, bias)
         for g, w in zip(got, want):
             assert g.shape == w.shape and g.tobytes() == w.tobytes()

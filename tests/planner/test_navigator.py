@@ -1,13 +1,13 @@
-"""The default planner (planner.navigator): path, maneuver choice, MPC and heading, through plan()."""
+"""The default planner (planner.nominal.navigator): path, maneuver choice, MPC and heading, through plan()."""
 import math
 
 import numpy as np
 import pytest
 
-from planner.mpc import MPCConfig
-from planner.navigator import MPCPlanner, NavigatorConfig
+from planner.map.voxel_map import MapConfig, VoxelMap
+from planner.mpc.config import MPCConfig
+from planner.nominal.navigator import MPCPlanner, NavigatorConfig
 from planner.types import ObstaclePrediction, PlannerInput
-from planner.voxel_map import MapConfig, VoxelMap
 
 R_ROBOT = 0.437
 GOAL = np.array([15.5, 0.0, 1.2])
@@ -58,8 +58,7 @@ def test_a_person_close_beside_the_drone_is_kept_in_view_while_it_gives_way():
                                 velocity=np.array([-0.6, 0.6, 0.0]))
     p = np.array([5.0, 0.0])
     tr = pl.plan(_input(0.0, p, (0.0, 0.0), [person], occupancy=occ))
-    cfg = pl.cfg
-    assert _bearing_off(tr.yaw, p, person.center) < cfg.camera_half_fov  # the person stays in view
+    assert _bearing_off(tr.yaw, p, person.center) < pl.half_fov  # the person stays in view
     moved = pl.last_maneuver.positions[10] - p
     assert np.hypot(*moved) > 0.3  # it does give way
     gap = np.linalg.norm(pl.last_maneuver.positions[1:] - person.predict(0.1 * np.arange(1, 26))[:, :2], axis=1)
@@ -127,5 +126,24 @@ def test_a_walker_just_passed_does_not_turn_the_camera_from_a_fast_flight():
         ahead = pl.last_maneuver.positions[10]
         assert ahead[0] - p[0] > 1.2  # flying on
         off[name] = _bearing_off(tr.yaw, p, ahead)
-    assert off["now"] < pl.cfg.camera_half_fov - 0.1
-    assert off["earlier"] > pl.cfg.camera_half_fov + 0.1
+    assert off["now"] < pl.half_fov - 0.1
+    assert off["earlier"] > pl.half_fov + 0.1
+
+
+def test_the_half_view_is_the_context_cameras_unless_configured():
+    import math
+    from dataclasses import replace
+
+    from context_factory import example_context
+    from dodt.frames import CameraIntrinsics
+    from dodt.geometry import half_view
+
+    wide = CameraIntrinsics(width=848, height=480, fx=420.0, fy=420.0, cx=424.0, cy=240.0)
+    pl = _planner()
+    pl.reset(example_context(intrinsics=wide))
+    assert pl.half_fov == half_view(wide) == math.atan2(424.0, 420.0)
+    pl.reset(example_context())
+    assert pl.half_fov == half_view(CameraIntrinsics())
+    pinned = _planner(camera_half_fov=0.759)
+    pinned.reset(example_context(intrinsics=wide))
+    assert pinned.half_fov == 0.759

@@ -13,8 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from experiments.registry import DEFAULT_PLANNER, make_planner
+from planner.map.voxel_map import MapConfig, VoxelMap
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
-from planner.voxel_map import MapConfig, VoxelMap
 
 ROBOT_RADIUS = 0.437  # the drone's (sim/assets/quadrotor.urdf), as the closed loop sizes the planner
 GOAL = np.array([15.5, 0.0, 1.2])

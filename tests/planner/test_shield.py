@@ -1,15 +1,16 @@
-"""planner.shield: a plan is flown as it is while its commitment (followed for commit_time, then a stop) is
+"""planner.shield.shield: a plan is flown as it is while its commitment (followed for commit_time, then a stop) is
 safe; otherwise the shield flies a safe motion, the committed stop, or the hardest stop; it remembers
 people who leave the view, and never raises."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from planner.shield import PassiveSafetyShield, ShieldConfig
+from planner.map.visibility import SeenSpace
+from planner.map.voxel_map import MapConfig, VoxelMap
+from planner.shield.shield import PassiveSafetyShield, ShieldConfig
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
-from planner.visibility import SeenSpace
-from planner.voxel_map import MapConfig, VoxelMap
 
 GOAL = np.array([14.0, 0.0, 1.2])
 FENCE = (np.array([0.0, -2.0]), np.array([15.0, 2.0]))
@@ -122,6 +123,23 @@ def test_the_shield_says_why_it_stopped_remembering_someone():
     assert [(x, y, w) for x, y, w in shield.forgotten] == [(3.7, 1.2, "memory")]
     shield.plan(_input(5.0, (1.0, 0.0), (0.0, 0.0), [], occ=occ))
     assert shield.forgotten == []
+
+
+def test_telemetry_gives_the_latest_plans_path_threats_and_forgotten():
+    class WithPath(Straight):
+        path = np.array([[2.0, 0.0], [14.0, 0.0]])
+
+    shield = PassiveSafetyShield(WithPath((1.5, 0.0)), CFG)
+    assert shield.brake_accel == CFG.a_brake
+    shield.plan(_input(0.0, (2.0, 0.0), (1.5, 0.0), [_person(1, (9.0, 1.5))]))
+    t = shield.telemetry()
+    assert set(t) == {"path", "threats", "forgotten", "brake_accel"} and t["brake_accel"] == CFG.a_brake
+    np.testing.assert_array_equal(t["path"], WithPath.path)
+    np.testing.assert_array_equal(t["threats"], shield.threats)
+    assert t["threats"].shape == (1, 3) and t["forgotten"] == []
+    shield.plan(replace(_input(0.1, (2.0, 0.0), (1.5, 0.0)), stamp=math.nan))
+    assert shield.telemetry()["threats"] is None  # an invalid input: no discs were checked
+    assert PassiveSafetyShield(Straight((0.0, 0.0)), CFG).telemetry()["path"] is None
 
 
 def test_when_nothing_is_safe_the_drone_stops_as_hard_as_it_can():

@@ -1,4 +1,4 @@
-"""planner.voxel_map: insertion, free-space carving, dynamic clearing, bad depth, queries, determinism."""
+"""planner.map.voxel_map: insertion, free-space carving, dynamic clearing, bad depth, queries, determinism."""
 import sys
 from pathlib import Path
 
@@ -8,7 +8,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "dodt"))  # tests/dodt/synthetic.py
 
 from dodt.frames import CameraIntrinsics  # noqa: E402
-from planner.voxel_map import MapConfig, VoxelMap  # noqa: E402
+from planner.map.voxel_map import MapConfig, VoxelMap  # noqa: E402
 from synthetic import camera_pose, render_depth  # noqa: E402
 
 K = CameraIntrinsics()
@@ -389,7 +389,7 @@ def test_column_bands_and_occupied_centres_equal_the_direct_computations(height)
     against the plain numpy definitions."""
     import cv2
 
-    from planner.voxel_map import _column_any
+    from planner.map.voxel_map import _column_any
 
     rng = np.random.default_rng(0)
     m = VoxelMap(MapConfig(origin=(-1, -1, -0.1), size=(2.0, 1.5, height)))

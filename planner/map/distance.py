@@ -1,13 +1,20 @@
-"""Exact Euclidean distance transform of a 2D grid, compiled.
+"""Euclidean distance transforms of a 2D grid: from each cell to the nearest feature cell, in cells.
 
-Meijster, Roerdink and Hesselink's two-pass algorithm on integer squared distances: the squared distance
-from each cell to the nearest feature cell is exact, so its square root (correctly rounded) is the same
-float as scipy.ndimage.distance_transform_edt's, which takes the root of the same integer sum.
+exact_distance: Meijster, Roerdink and Hesselink's two-pass algorithm on integer squared distances,
+compiled: the squared distance from each cell to the nearest feature cell is exact, so its square root
+(correctly rounded) is the same float as scipy.ndimage.distance_transform_edt's, which takes the root of
+the same integer sum.
+opencv_distance: OpenCV's precise Euclidean transform (DIST_MASK_PRECISE), computed in float32. Through
+Intel IPP (OpenCV's default where it is built in) it is within a float32 rounding step or so of the exact
+distance, not always the correctly rounded one, and not always the same floats from call to call on the
+same input (opencv/opencv#24082); without IPP (cv2.ipp.setUseIPP(False)) it is exact_distance rounded to
+float32.
 """
 from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 from numba import njit
 
@@ -48,7 +55,13 @@ def _edt(feature):
     return out
 
 
-def distance_to(feature: np.ndarray) -> np.ndarray:
+def exact_distance(feature: np.ndarray) -> np.ndarray:
     """(nx, ny) float64 Euclidean distance, in cells, from each cell to the nearest True cell of
     ``feature`` (at least one must be True): scipy.ndimage.distance_transform_edt(~feature), bit for bit."""
     return _edt(np.ascontiguousarray(feature, dtype=np.bool_))
+
+
+def opencv_distance(feature: np.ndarray) -> np.ndarray:
+    """(nx, ny) float64 Euclidean distance, in cells, from each cell to the nearest True cell of
+    ``feature`` (at least one must be True), as OpenCV's precise transform gives it in float32."""
+    return cv2.distanceTransform((~feature).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(float)

@@ -1,4 +1,4 @@
-"""The MPC's QP structure (planner.mpc's module docstring): where each variable and row lives, the cost
+"""The MPC's QP structure (planner.mpc.solver's module docstring): where each variable and row lives, the cost
 matrix P, the sparsity pattern of A with its constant values, the constant bounds, and an OSQP instance
 set up on them. Every call then changes only q, l, u and the values of A.
 """
@@ -8,7 +8,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from planner.mpc_config import MPCConfig
+from planner.mpc.config import MPCConfig
 
 
 def rollout(p0, v0, acc, dt):

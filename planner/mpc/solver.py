@@ -18,11 +18,6 @@ slack per step, both >= 0 and in metres.
         Where c_k lies within side_bias of the obstacle's line of relative motion, it is first moved
         side_bias off that line, toward the obstacle's back: near head-on, from behind or crossing, the
         plane then asks the drone to step aside or pass behind rather than to outrun the obstacle.
-    (4') Passing sides: the homotopy_obstacles nearest obstacles may be forced to either side of their
-        line of relative motion (c_k mirrored across it before linearising). The side kept from the
-        last call is solved first; when it needs more than homotopy_trigger of dynamic slack,
-        every other side combination is solved too, each by its own OSQP instance warm-started from its
-        own last solution, and the cheapest J wins (with hysteresis toward the side kept).
     (5) Occupied voxels (centres q): greedy separating planes per step, from c_k:
         n = (c_k - q)/|c_k - q| for the nearest q, n.p_k + ss_k >= n.q + robot_radius + voxel/2 + margin,
         points behind the plane through q are dropped, repeat up to K_s times. Where c_k is closer than
@@ -35,9 +30,8 @@ P and the sparsity pattern of A are fixed at construction (room for max_dynamic 
 step); every call only updates q, l, u and the values of A, warm-started from the previous
 solution shifted in time. Obstacle predictions are taken to start at the planning time t0.
 
-Modules: planner.mpc_config (MPCConfig), planner.mpc_qp (the QP's fixed structure), planner.mpc_rows
-(the obstacle half-spaces (4), (5)), planner.homotopy (the passing sides (4')), this one (the solve),
-planner.mpc_bench (the benchmark; ``bench_mpc`` is importable from here too).
+Modules: planner.mpc.config (MPCConfig), planner.mpc.qp (the QP's fixed structure), planner.mpc.rows
+(the obstacle half-spaces (4), (5)), this one (the solve); its benchmark is experiments.bench_mpc.
 """
 from __future__ import annotations
 
@@ -49,22 +43,14 @@ import numpy as np
 import osqp
 
 from planner.fallback import brake_and_hold
-from planner.homotopy import side_combinations
-from planner.mpc_config import MPCConfig
-from planner.mpc_qp import QPLayout, rollout
-from planner.mpc_rows import dynamic_candidates, dynamic_rows, finite_rows, static_rows
+from planner.mpc.config import MPCConfig
+from planner.mpc.qp import QPLayout, rollout
+from planner.mpc.rows import dynamic_candidates, dynamic_rows, finite_rows, static_rows
 from planner.types import Trajectory
 
-__all__ = ["MPC", "MPCConfig", "MPCResult"]
+__all__ = ["MPC", "MPCResult"]
 
 _OK = {osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE}
-
-
-def __getattr__(name):  # the benchmark imports this module, so it is loaded only when asked for
-    if name == "bench_mpc":
-        from planner.mpc_bench import bench_mpc
-        return bench_mpc
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +62,6 @@ class MPCResult:
     max_slack_static: float  # m
     solve_ms: float  # wall time of the whole call (updates + OSQP), measured only
     ignored_obstacles: int = 0  # obstacles skipped for non-finite data
-    qp_solves: int = 1  # QPs solved (one per passing-side combination tried, per linearisation round)
 
 
 class MPC:
@@ -87,14 +72,11 @@ class MPC:
         self.qp = QPLayout(cfg)
         self.N = cfg.horizon
         self.solver = self.qp.new_solver()
-        self._slot_solvers = {}  # passing-side pattern -> its own OSQP instance (made when first needed)
         self.reset()
 
     def reset(self) -> None:
         """Forget the previous solution: the next call starts cold."""
         self._prev = None  # (t0, z, y, positions (N+1, 3), velocities, accelerations)
-        self._sides = {}  # obstacle id -> the side (+-1) the last plan passed it on, for the enumerated ones
-        self._slot_prev = {}  # passing-side pattern -> (t0, z, y) of its last solution, its own warm start
 
     def _fallback(self, t0, p0, v0, why, tic, iters=0, ignored=0):
         self._prev = None
@@ -106,17 +88,6 @@ class MPC:
         tr = brake_and_hold(t0, p0, v, a_max=a, dt=self.cfg.dt, horizon=self.N, status=f"fallback:{why}")
         tr = Trajectory(tr.t0, tr.dt, tr.positions, tr.velocities, tr.accelerations, status=tr.status, solve_ms=ms)
         return MPCResult(tr, tr.status, iters, 0.0, 0.0, ms, ignored)
-
-    def _tolerance(self, solver, loose: bool) -> None:
-        """The normal OSQP limits, or the short, loose ones other passing sides are compared on (set only
-        when the solver has the others: a new solver has the normal ones)."""
-        if getattr(solver, "_loose", False) == loose:
-            return
-        c = self.cfg
-        solver.update_settings(max_iter=c.homotopy_max_iter if loose else c.max_iter,
-                               eps_abs=c.homotopy_eps if loose else c.eps_abs,
-                               eps_rel=c.homotopy_eps if loose else c.eps_rel)
-        solver._loose = loose
 
     def _rejected(self, res) -> str:
         """Why an OSQP result cannot be used ('' when it can): solved (or out of iterations with a primal
@@ -142,8 +113,7 @@ class MPC:
         return c, zw, yw
 
     def _linear_cost(self, p_ref, v_ref, a0):
-        """q of (2), and the constant part of the cost: OSQP objective + constant = J >= 0, comparable
-        across passing sides."""
+        """q of (2)."""
         cfg, N, qp = self.cfg, self.N, self.qp
         q = np.zeros(qp.n)
         qx = q[:6 * N].reshape(N, 6)
@@ -153,9 +123,7 @@ class MPC:
         q[qp.iu:qp.iu + 3] = -2 * cfg.w_jerk * a0
         q[qp.isd:qp.iss] = cfg.w_slack_lin
         q[qp.iss:] = cfg.w_slack_lin * cfg.static_slack_scale
-        const = (cfg.w_pos * np.sum(p_ref[:-1] ** 2) + cfg.w_terminal * np.sum(p_ref[-1] ** 2)
-                 + cfg.w_vel * np.sum(v_ref ** 2) + cfg.w_jerk * np.sum(a0 ** 2))
-        return q, const
+        return q
 
     def _bounds(self, p0, v0, geofence):
         """l, u for the initial state (1), the altitude band (3) and the geofence (6); and the fence the
@@ -179,78 +147,32 @@ class MPC:
                     [lo[0] + req, req - hi[0], lo[1] + req, req - hi[1]], N)
         return l, u, fence
 
-    def _solve_sides(self, t0, p0, c, cand, obs, guided, q, l, u, Ax0, zw, yw, const):
-        """Solves one QP per passing-side combination (4') (one only when guided, or when the side kept
-        needs no more than homotopy_trigger of dynamic slack) and keeps the cheapest, with hysteresis
-        toward the side kept. Returns (best, OSQP iterations, QPs solved, why the last was rejected);
-        best: (cost, z, y, normals, rhs, forced sides, (solver, Ax, l, loose)), or None if all were."""
-        cfg, N, dt, qp = self.cfg, self.N, self.cfg.dt, self.qp
-        combos, enum_ids = ([None], []) if guided else side_combinations(cfg, c, cand, obs, self._sides)
-        best, iters, n_hom, why = None, 0, 0, ""
-        for i, forced in enumerate(combos):
-            nd, bd = dynamic_rows(cfg, c, cand, p0, forced, 0.0 if guided else None)
-            if guided:  # never ask for more room than the guide keeps: the half-space holds the guide itself
-                bd = np.minimum(bd, np.einsum("kjd,kd->kj", nd, c))
-            nd[~np.isfinite(bd)], bd[~np.isfinite(bd)] = 0.0, -np.inf
-            J = nd.shape[1]
-            Ax = Ax0.copy()
-            Ax[qp.dyn_pos[:, :J]] = nd
-            l[qp.rd:qp.rs].reshape(N, -1)[:, :J] = bd
-            solver, z0, y0, key = self.solver, zw, yw, None
-            if forced is not None:  # each passing-side pattern keeps its own solver and warm start
-                key = tuple(float(forced[j]) for j, _ in sorted(enum_ids, key=lambda e: str(e[1])))
-                if key not in self._slot_solvers:
-                    self._slot_solvers[key] = qp.new_solver()
-                solver, pv = self._slot_solvers[key], self._slot_prev.get(key)
-                sk = None if pv is None else round((t0 - pv[0]) / dt)
-                if cfg.warm_start and sk is not None and 0 <= sk <= N:
-                    z0, y0 = qp.shift(pv[1], pv[2], sk)
-            solver.update(q=q, l=l, u=u, Ax=Ax)
-            # the other sides are only compared: a looser, shorter solve; the one kept is refined after
-            loose = i > 0
-            self._tolerance(solver, loose)
-            solver.warm_start(x=z0, y=y0)
-            res = solver.solve(raise_error=False)
-            if key is not None and np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.y)):
-                self._slot_prev[key] = (float(t0), np.array(res.x), np.array(res.y))
-            iters += int(res.info.iter)
-            n_hom += 1
-            why = self._rejected(res)
-            if why:
-                continue
-            cost = float(res.info.obj_val) + const
-            if i > 0:  # hysteresis: another side must be clearly cheaper than the one kept so far
-                cost = cost * (1.0 + cfg.homotopy_hysteresis) + cfg.homotopy_hysteresis_abs
-            if best is None or cost < best[0]:
-                best = (cost, np.array(res.x), np.array(res.y), nd, bd, forced, (solver, Ax, l.copy(), loose))
-            if i == 0 and np.max(res.x[qp.isd:qp.iss]) <= cfg.homotopy_trigger:
-                break  # the side kept costs no slack worth speaking of: the others are not tried
-        if best is not None:
-            self._sides = {} if best[5] is None else {k: float(best[5][j]) for j, k in enum_ids if k is not None}
-        return best, iters, n_hom, why
-
-    def _refine(self, best, q, u):
-        """The winner's (z, y) and OSQP iterations: a side that won on a loose solve is finished to the
-        normal tolerance from there (kept as it was if that solve fails)."""
-        _, zw, yw, _, _, _, (solver, Ax, lb, loose) = best
-        if not loose:
-            return zw, yw, 0
-        solver.update(q=q, l=lb, u=u, Ax=Ax)
-        self._tolerance(solver, False)
-        solver.warm_start(x=zw, y=yw)
-        res = solver.solve(raise_error=False)
-        if not self._rejected(res):
-            zw, yw = np.array(res.x), np.array(res.y)
-        return zw, yw, int(res.info.iter)
+    def _solve_qp(self, c, cand, p0, guided, q, l, u, Ax0, zw, yw):
+        """The QP with the moving obstacles' rows (4) linearised at c, solved from the warm start (zw, yw).
+        Returns (z, y, OSQP iterations, normals (N, J, 3), right-hand sides (N, J), why the result cannot be
+        used: '' when it can)."""
+        N, qp = self.N, self.qp
+        nd, bd = dynamic_rows(self.cfg, c, cand, p0, 0.0 if guided else None)
+        if guided:  # never ask for more room than the guide keeps: the half-space holds the guide itself
+            bd = np.minimum(bd, np.einsum("kjd,kd->kj", nd, c))
+        nd[~np.isfinite(bd)], bd[~np.isfinite(bd)] = 0.0, -np.inf
+        J = nd.shape[1]
+        Ax = Ax0.copy()
+        Ax[qp.dyn_pos[:, :J]] = nd
+        l[qp.rd:qp.rs].reshape(N, -1)[:, :J] = bd
+        self.solver.update(q=q, l=l, u=u, Ax=Ax)
+        self.solver.warm_start(x=zw, y=yw)
+        res = self.solver.solve(raise_error=False)
+        return np.array(res.x), np.array(res.y), int(res.info.iter), nd, bd, self._rejected(res)
 
     def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None,
               geofence=None, guide=None) -> MPCResult:
         """One receding-horizon plan from (position, velocity) at time t0; see the module docstring.
         geofence: (lo (2,), hi (2,)) the known walls of the flight area in x, y (a corridor's), or None;
         every planned position keeps geofence_margin inside it, on the static slack (6).
-        guide: (N, 3) positions of a motion chosen beforehand (planner.maneuvers), or None: the obstacles
+        guide: (N, 3) positions of a motion chosen beforehand (planner.nominal.maneuvers), or None: the obstacles
         are linearised at it instead of at the previous plan, and the passing sides are the guide's (no
-        side enumeration (4'), no tie-break offset), and no half-space asks for more room than the guide
+        tie-break offset), and no half-space asks for more room than the guide
         keeps (its right-hand side is capped at the guide's own value): the decision is the guide's, the MPC
         refines it."""
         tic = time.perf_counter()
@@ -276,10 +198,10 @@ class MPC:
         fwd = (p_ref[-1] - p0)[:2]
         fwd = fwd / np.linalg.norm(fwd) if np.linalg.norm(fwd) > 1e-6 else np.array([1.0, 0.0])
         side = np.array([-fwd[1], fwd[0], 0.0])  # left of the direction of travel
-        q, const = self._linear_cost(p_ref, v_ref, a0)
+        q = self._linear_cost(p_ref, v_ref, a0)
         l, u, fence = self._bounds(p0, v0, geofence)
         v_plan = (p_ref[-1] - p0) / (N * dt)
-        iters, n_hom = 0, 0
+        iters = 0
         for _ in range(max(1, cfg.iterations)):
             cand = dynamic_candidates(cfg, c, obs, side, v_plan)
             ns, bs = static_rows(cfg, c, pts, side, p0)
@@ -287,13 +209,10 @@ class MPC:
             Ax0 = qp.Ax0.copy()
             Ax0[qp.sta_pos] = ns
             l[qp.rs:qp.rg] = bs.ravel()
-            best, it, nh, why = self._solve_sides(t0, p0, c, cand, obs, guided, q, l, u, Ax0, zw, yw, const)
-            iters, n_hom = iters + it, n_hom + nh
-            if best is None:
-                return self._fallback(t0, p0, v0, why, tic, iters, ignored)
-            _, _, _, nd, bd, _, _ = best
-            zw, yw, it = self._refine(best, q, u)  # (a second round starts from this solution)
+            zw, yw, it, nd, bd, why = self._solve_qp(c, cand, p0, guided, q, l, u, Ax0, zw, yw)
             iters += it
+            if why:
+                return self._fallback(t0, p0, v0, why, tic, iters, ignored)
             acc = np.clip(zw[qp.iu:qp.isd].reshape(N, 3), -qp.amax, qp.amax)
             pos, vel = rollout(p0, v0, acc, dt)
             c = pos[1:]
@@ -304,4 +223,4 @@ class MPC:
         self._prev = (float(t0), zw, yw, pos, vel, acc)
         ms = (time.perf_counter() - tic) * 1e3
         traj = Trajectory(float(t0), dt, pos, vel, acc, status="solved", solve_ms=ms)
-        return MPCResult(traj, "solved", iters, slack_d, slack_s, ms, ignored, n_hom)
+        return MPCResult(traj, "solved", iters, slack_d, slack_s, ms, ignored)

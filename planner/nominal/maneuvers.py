@@ -1,7 +1,7 @@
 """Maneuver selection: a few thousand short candidate motions scored against the static map, the goal
 and several futures of every moving obstacle; the best one guides the MPC.
 
-Why: the linear MPC (planner.mpc) linearises each obstacle at its previous plan, so whether it passes
+Why: the linear MPC (planner.mpc.solver) linearises each obstacle at its previous plan, so whether it passes
 a person left or right, waits, backs off or goes on is inherited from that plan and a tie-break rule,
 and the plan can switch sides from one replan to the next. That choice is combinatorial, and a sampled
 set of whole motions, each scored over the horizon, makes it well (sampling-based local planners and
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from planner.distance import distance_to
+
 from planner.types import ObstaclePrediction
 
 
@@ -93,28 +93,6 @@ class ManeuverConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"ManeuverConfig.{name}: must be a finite number >= 0, got {v!r}")
-
-
-@dataclass(frozen=True, eq=False)
-class ViewTerm:
-    """What the camera should keep in view (view_costs takes these): the heading rule's inputs."""
-    headings: np.ndarray  # (H,) rad
-    half_view: float  # rad: the camera's half field of view less a margin
-    look_step: int  # the motion is p0 to the position at this step...
-    look_time: float  # ... this many seconds ahead
-    fallback: float  # rad: the motion's bearing when a candidate moves less than 0.3 m (nan: none)
-    watch: np.ndarray  # (O, J, 2): each obstacle's predicted centre at the watch steps
-    watch_steps: np.ndarray  # (J,) int
-    watch_range: float  # m
-    pull: float  # per rad between the heading and the motion
-
-    def costs(self, P: np.ndarray, p0) -> tuple[np.ndarray, np.ndarray]:
-        """view_costs of candidates P (C, N, 2) from p0: the least view cost (C,) and its heading index (C,)."""
-        return view_costs(np.ascontiguousarray(P, dtype=float), np.asarray(p0, float)[:2], self.look_step,
-                          self.look_time, self.fallback,
-                          np.ascontiguousarray(self.watch, dtype=float).reshape(-1, len(self.watch_steps), 2),
-                          np.asarray(self.watch_steps, np.int64), self.watch_range, self.half_view,
-                          np.asarray(self.headings, float), self.pull)
 
 
 @dataclass(frozen=True, eq=False)
@@ -416,76 +394,6 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
     return best_c, best_j
 
 
-@njit(cache=True, nogil=True)
-def view_costs(P, p0, k_look, look_time, fallback, watch, k_watch, watch_range, half_view, headings, pull):
-    """How well a camera can keep in view where each candidate goes and the obstacles to watch.
-
-    For each candidate c (positions P (C, N, 2), P[c, k - 1] at step k, p0 at step 0), bearings with weights:
-    the motion, from p0 to the position at step k_look, weighted by its mean speed (at least 0.5) when it is
-    longer than 0.3 m, else ``fallback`` (a bearing; nan for none) weighted 0.5; and each watched point
-    watch[o, j] (O, J, 2) seen from the candidate's position at step k_watch[j] when 0.05 < distance <
-    watch_range, weighted 2 (1 - distance / watch_range). Returns, per candidate, the least over ``headings``
-    of sum_b w_b max(|b - h| - half_view, 0) + pull |motion - h| and the index of the heading attaining it
-    (cost 0 and index -1 when there is no bearing)."""
-    C = P.shape[0]
-    O, Jn = watch.shape[0], watch.shape[1]
-    NH = headings.shape[0]
-    best = np.zeros(C)
-    arg = np.full(C, -1, np.int64)
-    b = np.empty(1 + O * Jn)
-    w = np.empty(1 + O * Jn)
-    for c in range(C):
-        x = P[c, k_look - 1, 0] - p0[0] if k_look > 0 else 0.0
-        y = P[c, k_look - 1, 1] - p0[1] if k_look > 0 else 0.0
-        n = 0
-        motion = fallback
-        if math.hypot(x, y) > 0.3:
-            motion = math.atan2(y, x)
-        if not math.isnan(motion):
-            b[0], w[0] = motion, max(math.hypot(x, y) / look_time, 0.5)
-            n = 1
-        for o in range(O):
-            for j in range(Jn):
-                k = k_watch[j]
-                dx, dy = (P[c, k - 1, 0], P[c, k - 1, 1]) if k > 0 else (p0[0], p0[1])
-                qx, qy = watch[o, j, 0] - dx, watch[o, j, 1] - dy
-                dist = math.hypot(qx, qy)
-                if 0.05 < dist < watch_range:
-                    b[n], w[n] = math.atan2(qy, qx), 2.0 * (1.0 - dist / watch_range)
-                    n += 1
-        if n == 0:
-            continue
-        lo, li = math.inf, -1
-        for i in range(NH):
-            h = headings[i]
-            s = 0.0
-            for m in range(n):
-                off = abs((b[m] - h + math.pi) % (2 * math.pi) - math.pi)
-                s += max(off - half_view, 0.0) * w[m]
-            if not math.isnan(motion):
-                s += pull * abs((motion - h + math.pi) % (2 * math.pi) - math.pi)
-            if s < lo:
-                lo, li = s, i
-        best[c], arg[c] = lo, li
-    return best, arg
-
-
-def static_clearance(column_occupied: np.ndarray, resolution: float, origin_xy, geofence=None) -> np.ndarray:
-    """(nx, ny) metres from each column centre to the nearest occupied column's edge (cells outside the
-    geofence, when given, count as occupied: the walls of the flight area)."""
-    occ = np.asarray(column_occupied, dtype=bool).copy()
-    if geofence is not None:
-        lo, hi = (np.asarray(x, float).reshape(-1)[:2] for x in geofence)
-        nx, ny = occ.shape
-        cx = origin_xy[0] + (np.arange(nx) + 0.5) * resolution
-        cy = origin_xy[1] + (np.arange(ny) + 0.5) * resolution
-        occ[(cx < lo[0]) | (cx > hi[0]), :] = True
-        occ[:, (cy < lo[1]) | (cy > hi[1])] = True
-    if not occ.any():
-        return np.full(occ.shape, 1e3)
-    return distance_to(occ) * resolution - 0.5 * resolution
-
-
 class ManeuverSelector:
     """Chooses the maneuver that guides the MPC (module docstring). ``choose`` is called once per plan."""
 
@@ -546,7 +454,7 @@ class ManeuverSelector:
     def choose(self, t0: float, p0, v0, guide_dir, obstacles, clear: np.ndarray, goal_field: np.ndarray,
                origin_xy, resolution: float, goal_xy) -> Maneuver:
         """The best candidate from (p0, v0) at time t0; goal_field: metres to goal_xy per column cell,
-        clear: static clearance per cell (static_clearance), both on the grid at origin_xy, resolution."""
+        clear: static clearance per cell (planner.map.clearance), both on the grid at origin_xy, resolution."""
         cfg, N = self.cfg, self.N
         gi = np.clip(np.floor((np.asarray(goal_xy, float)[:2] - origin_xy) / resolution).astype(int), 0,
                      np.array(clear.shape) - 1)

@@ -1,4 +1,4 @@
-"""Half-space rows of the MPC's obstacle constraints (planner.mpc's module docstring, (4) and (5)).
+"""Half-space rows of the MPC's obstacle constraints (planner.mpc.solver's module docstring, (4) and (5)).
 
 Moving obstacles: tangent planes of each predicted ellipsoid at the radial projection of the
 linearisation point c_k, after the tie-break offset that picks the passing side. Occupied voxels:
@@ -12,17 +12,15 @@ import math
 import numpy as np
 from numba import njit
 
-from planner.mpc_config import MPCConfig
+from planner.mpc.config import MPCConfig
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _tie_break(d0, d1, d2, s, forced, bias):
+def _tie_break(d0, d1, d2, s, bias):
     """The offset d from an obstacle to c_k after the tie-break (dynamic_rows): d's component along the
-    side s (3,) below bias is raised to bias, on d's side (left if 0) or the forced one (-1, +1; 0: d's)."""
+    side s (3,) below bias is raised to bias, on d's side (left if 0)."""
     lat = (d0 * s[0] + d1 * s[1]) + d2 * s[2]
     sgn = -1.0 if lat < 0 else 1.0
-    if forced != 0:
-        sgn = forced
     m = abs(lat)
     if not (m >= bias or m != m) or bias != bias:  # np.maximum's: NaN if either is
         m = bias
@@ -55,14 +53,12 @@ def dynamic_candidates(cfg: MPCConfig, c, obstacles, side, v_plan=None):
     return sorted(cand, key=lambda e: e[:2])[:cfg.max_dynamic]
 
 
-def dynamic_rows(cfg: MPCConfig, c, cand, p0, forced=None, bias=None):
-    """(4): unit normals (N, J, 3) and right-hand sides (N, J) for the candidates (dynamic_candidates);
-    forced (J,): the side each must be passed on (0: the tie-break rule's).
+def dynamic_rows(cfg: MPCConfig, c, cand, p0, bias=None):
+    """(4): unit normals (N, J, 3) and right-hand sides (N, J) for the candidates (dynamic_candidates).
 
     Tie-break: offsets d from obstacle j to c_k whose component along its side (dynamic_candidates: left
     of the obstacle's velocity relative to the planned motion, else left of travel) is below side_bias
-    get it raised to side_bias, on their side (left if 0), or, where forced is non-zero, on that side
-    (mirrored across the line if it lies on the other): a symmetric head-on plan would otherwise only
+    get it raised to side_bias, on their side (left if 0): a symmetric head-on plan would otherwise only
     ever brake or push through on slack, and every plane then asks the plan to pass the obstacle there.
     Any tangent plane is conservative."""
     N = cfg.horizon
@@ -72,16 +68,15 @@ def dynamic_rows(cfg: MPCConfig, c, cand, p0, forced=None, bias=None):
     ax = np.stack([e[3] for e in cand], axis=1)
     side = np.stack([e[4] for e in cand])  # (J, 3)
     J = len(cand)
-    fz = np.zeros(J) if forced is None else np.asarray(forced, dtype=float).reshape(J)
     n, b = np.empty((N, J, 3)), np.empty((N, J))
-    _planes(np.ascontiguousarray(c, dtype=float), o, ax, np.ascontiguousarray(side, dtype=float), fz,
+    _planes(np.ascontiguousarray(c, dtype=float), o, ax, np.ascontiguousarray(side, dtype=float),
             np.asarray(p0, dtype=float), float(cfg.side_bias if bias is None else bias), float(cfg.z_min),
             float(cfg.z_max), n, b)
     return n, b
 
 
 @njit(cache=True, nogil=True)
-def _planes(c, o, ax, side, forced, p0, bias, z_min, z_max, n_out, b_out):
+def _planes(c, o, ax, side, p0, bias, z_min, z_max, n_out, b_out):
     """dynamic_rows' tangent planes, each computed as the numpy definition computes it, operation for
     operation (sums over x, y, z in that order, as numpy's reductions over 3 do): the same floats.
     An ellipsoid spanning the whole altitude band (a person) is treated as its elliptic cylinder
@@ -94,7 +89,7 @@ def _planes(c, o, ax, side, forced, p0, bias, z_min, z_max, n_out, b_out):
             o0, o1, o2 = o[k, j, 0], o[k, j, 1], o[k, j, 2]
             a0, a1, a2 = ax[k, j, 0], ax[k, j, 1], ax[k, j, 2]
             fl = 0.0 if (o2 - a2 <= z_min) and (o2 + a2 >= z_max) else 1.0
-            d0, d1, d2 = _tie_break(c[k, 0] - o0, c[k, 1] - o1, (c[k, 2] - o2) * fl, side[j], forced[j], bias)
+            d0, d1, d2 = _tie_break(c[k, 0] - o0, c[k, 1] - o1, (c[k, 2] - o2) * fl, side[j], bias)
             w0, w1, w2 = p0[0] - o0, p0[1] - o1, (p0[2] - o2) * fl
             if not math.sqrt((w0 * w0 + w1 * w1) + w2 * w2) > 1e-9:
                 w0, w1, w2 = 0.0, 1.0, 0.0

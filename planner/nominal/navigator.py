@@ -4,7 +4,7 @@ among sampled motions, the MPC refining it.
 Every call: (1) every ``path_period`` seconds, or sooner when the current path runs into newly
 occupied cells, an A* path to the goal on the map's column grid at the flight altitude, and the
 cost-to-go field the maneuvers score against (both cached on the map's version);
-(2) ``planner.maneuvers`` scores two-phase candidate motions against the goal, static clearance and
+(2) ``planner.nominal.maneuvers`` scores two-phase candidate motions against the goal, static clearance and
 several hypotheses of each moving obstacle's future, and the chosen one is the MPC's reference and the
 point its obstacle constraints are linearised at (without a map: a reference along the straight line
 to the goal at cruise speed);
@@ -20,10 +20,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planner.fallback import brake_and_hold
-from planner.global_path import CostToGo, PathFollower, block_discs, grid_path
-from planner.maneuvers import ManeuverConfig, ManeuverSelector, ViewTerm, static_clearance
-from planner.mpc import MPC, MPCConfig
+from dodt.context import EpisodeContext
+from dodt.frames import CameraIntrinsics
+from dodt.geometry import half_view
+from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
+from planner.map.clearance import static_clearance
+from planner.mpc.config import MPCConfig
+from planner.mpc.solver import MPC
+from planner.nominal.global_path import CostToGo, PathFollower, block_discs, grid_path
+from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector
+from planner.nominal.view import ViewTerm
 from planner.types import PlannerInput, Trajectory
 
 
@@ -38,7 +44,7 @@ class NavigatorConfig:
     block_times: tuple[float, ...] = (0.0, 0.5, 1.0)  # s; moving obstacles block the path search here
     look_ahead: float = 2.0  # m along the path for the heading
     use_geofence: bool = True  # keep the plan inside PlannerInput.geofence (the corridor's walls) when given
-    # the maneuver layer (planner.maneuvers): picks how to pass moving obstacles and the MPC refines that motion
+    # the maneuver layer (planner.nominal.maneuvers): picks how to pass moving obstacles and the MPC refines that motion
     maneuvers: ManeuverConfig = field(default_factory=ManeuverConfig)
     guide_look_ahead: float = 1.5  # m along the path: the maneuvers' frame points at this point
     # With maneuvers the heading is chosen to keep in the camera's view both where the drone goes (the chosen
@@ -48,9 +54,10 @@ class NavigatorConfig:
     # far each bearing lies outside the half field of view less fov_margin, times its weight, plus a small
     # pull toward the motion.
     heading_look_time: float = 1.0  # s
-    # rad: a real D435's 43.5 degrees, wider than the simulated camera's 39.7 (640x480, fx 387); less
-    # fov_margin, the rule keeps what it watches within 34.9 degrees, inside the view
-    camera_half_fov: float = 0.759
+    # rad: the camera's half horizontal field of view; None: the episode context's camera's (39.7 degrees for
+    # the simulated D435 depth stream at 640x480, fx 387; a real D435's is 43.5). Less fov_margin, the rule
+    # keeps what it watches inside the view
+    camera_half_fov: float | None = None
     fov_margin: float = 0.15  # rad
     watch_range: float = 3.0  # m
     # s: the obstacles are watched where they and the drone will be at these times (bearing from the drone's
@@ -61,43 +68,6 @@ class NavigatorConfig:
 
 
 _HEADINGS = np.radians(np.arange(-180, 180, 5.0))  # the heading's choices
-# m, m/s, m/s^2: larger positions, velocities or accelerations are not a vehicle's (a position of 1e308 m,
-# finite, left a path of infinite length behind that failed the next plan); NaN compares false: refused too
-_PLAUSIBLE = 1e6
-
-
-def valid_input(inp: PlannerInput) -> bool:
-    """Whether a plan can be made from ``inp``: stamp, position, velocity, acceleration, goal and heading
-    finite (3,) values of a size some vehicle reaches (_PLAUSIBLE)."""
-    try:
-        return (all(np.shape(x) == (3,) and np.all(np.abs(np.asarray(x, dtype=float)) <= _PLAUSIBLE)
-                    for x in (inp.position, inp.velocity, inp.acceleration, inp.goal))
-                and abs(float(inp.stamp)) <= 1e9 and (inp.yaw is None or abs(float(inp.yaw)) <= 1e3))
-    except (TypeError, ValueError):
-        return False
-
-
-def invalid_input_stop(inp: PlannerInput, a_max: float) -> Trajectory:
-    """Brake and hold on what of ``inp`` is finite, status ``fallback:invalid_input``."""
-    return brake_and_hold(_finite_or(inp.stamp, 0.0), _vector_or_zero(inp.position), _vector_or_zero(inp.velocity),
-                          a_max=a_max, status="fallback:invalid_input")
-
-
-def _finite_or(x, default: float) -> float:
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return default
-    return x if math.isfinite(x) else default
-
-
-def _vector_or_zero(x) -> np.ndarray:
-    """x as a (3,) float vector (the fallback holds what is not finite), or zeros when it is not one."""
-    try:
-        a = np.asarray(x, dtype=float).reshape(3)
-    except (TypeError, ValueError):
-        return np.zeros(3)
-    return a
 
 
 class MPCPlanner:
@@ -111,7 +81,13 @@ class MPCPlanner:
                                          v_max=m.v_max_xy, robot_radius=m.robot_radius)
         self.reset()
 
-    def reset(self) -> None:
+    def reset(self, context: EpisodeContext | None = None) -> None:
+        """Before an episode; the context's camera gives the half view when the configuration has none (no
+        context: the default camera model's)."""
+        if self.cfg.camera_half_fov is not None:
+            self.half_fov = self.cfg.camera_half_fov
+        else:
+            self.half_fov = context.camera.half_view if context is not None else half_view(CameraIntrinsics())
         self.mpc.reset()
         self.selector.reset()
         self._fields = None  # (grid and fence key, column grid, static clearance)
@@ -244,12 +220,12 @@ class MPCPlanner:
         return p_ref, v_ref
 
     def _view_term(self, inp: PlannerInput, path_yaw: float | None) -> ViewTerm:
-        """The heading rule's bearings (config) as a maneuvers.ViewTerm over this call's obstacles."""
+        """The heading rule's bearings (config) as a view.ViewTerm over this call's obstacles."""
         c = self.cfg
         steps = lambda t, lo: min(max(int(round(t / c.mpc.dt)), lo), c.mpc.horizon)  # noqa: E731
         times = np.asarray(c.watch_times, float)
         watch = np.array([ob.predict(times)[:, :2] for ob in inp.obstacles], float).reshape(-1, len(times), 2)
-        return ViewTerm(_HEADINGS, c.camera_half_fov - c.fov_margin, steps(c.heading_look_time, 1),
+        return ViewTerm(_HEADINGS, self.half_fov - c.fov_margin, steps(c.heading_look_time, 1),
                         c.heading_look_time, math.nan if path_yaw is None else path_yaw, watch,
                         np.array([steps(t, 0) for t in c.watch_times], np.int64), c.watch_range, 0.05)
 
@@ -264,7 +240,7 @@ class MPCPlanner:
         maneuver choice and MPC), not the MPC's alone (bench_mpc measures that).
 
         Never raises and always returns a finite trajectory: a stamp, position, velocity, acceleration,
-        goal or heading that is not finite, or whose size no vehicle reaches (_PLAUSIBLE), gives
+        goal or heading that is not finite, or whose size no vehicle reaches (fallback.valid_input), gives
         brake-and-hold (status ``fallback:invalid_input``) and leaves the planner as it was; an error
         inside gives brake-and-hold (``error:<type>``) and resets the planner, whose state the error may
         have left half updated."""

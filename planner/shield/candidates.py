@@ -106,7 +106,7 @@ def _brake_from(P, V, k, N, dt, a_brake):
 
 def backups(P, V, commit_time: float, dt: float, a_brake: float, v_max: float) -> Candidates:
     """Each candidate (P, V: (C, K+1, 2) with the start at index 0) flown for commit_time, then a stop:
-    the motion the drone commits to (planner.shield)."""
+    the motion the drone commits to (planner.shield.shield)."""
     k = int(round(commit_time / dt))
     N = horizon_steps((commit_time,), v_max, a_brake, dt)
     Pb, Vb, Ab = _brake_from(np.ascontiguousarray(P), np.ascontiguousarray(V), k, N, dt, a_brake)

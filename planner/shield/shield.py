@@ -1,10 +1,10 @@
 """Passive safety as a constraint on any planner's plans (docs/planner.md).
 
-``PassiveSafetyShield`` wraps a planner (by default the maneuver + MPC planner of planner.navigator)
+``PassiveSafetyShield`` wraps a planner (by default the maneuver + MPC planner of planner.nominal.navigator)
 and checks every plan it makes before the drone flies it. What the drone commits to is the plan flown
 for ``commit_time`` and then a stop: replanned every 0.1 s, the commitment is extended as long as it
 stays safe, and if a replan fails the stop is what is left (FASTER's back-up trajectory). The check
-(planner.safety): the commitment keeps clear of static structure, of every place a tracked or
+(planner.shield.safety): the commitment keeps clear of static structure, of every place a tracked or
 remembered person could get to, unless the drone is at rest or moving away from the threat. When the plan's commitment is not safe, the shield flies the
 safe motion (a target velocity, then a stop) nearest to what the planner wanted; when none is safe,
 the last safe commitment from now on; when that no longer is, the least unsafe motion.
@@ -18,13 +18,14 @@ import math
 import time
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from planner.candidates import Candidates, backups, roll, target_velocities
-from planner.fallback import brake_and_hold
-from planner.navigator import invalid_input_stop, valid_input
-from planner.safety import check, in_the_way
+from dodt.context import EpisodeContext, reset_with_context
+from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
+from planner.map.clearance import static_clearance
+from planner.map.distance import opencv_distance
+from planner.shield.candidates import Candidates, backups, roll, target_velocities
+from planner.shield.safety import check, in_the_way
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 
 
@@ -59,17 +60,11 @@ class ShieldConfig:
     memory_merge: float = 1.0  # m: an obstacle reported this near a remembered one is that one again
     band: float = 0.5  # m: structure within this of the flight altitude counts
     # choosing an alternative: the one nearest the planner's velocity, plus w_way per metre its resting
-    # place lies in a walker's way over the way_look seconds after (planner.safety.in_the_way)
+    # place lies in a walker's way over the way_look seconds after (planner.shield.safety.in_the_way)
     w_way: float = 3.0
     way_look: float = 2.0
     hold_speed: float = 0.3  # m/s: stopping from slower than this holds a fixed point
     hold_reanchor: float = 0.3  # m: a hold point farther than this from the drone is set anew
-
-
-def distance_to(mask: np.ndarray, res: float) -> np.ndarray:
-    """(nx, ny) metres from each cell's centre to the nearest cell of ``mask`` (exact Euclidean; OpenCV's
-    transform, several times faster than scipy's here)."""
-    return cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(float) * res
 
 
 class PassiveSafetyShield:
@@ -80,10 +75,10 @@ class PassiveSafetyShield:
         self.cfg = cfg
         self.reset()
 
-    def reset(self) -> None:
-        self.planner.reset()
+    def reset(self, context: EpisodeContext | None = None) -> None:
+        """Before an episode: the wrapped planner is reset with the same context."""
+        reset_with_context(self.planner, context)
         self._fields = None
-        self._fence = None  # (clearance key, grid shape, cells outside the geofence)
         self._committed: Candidates | None = None  # the last safe commitment, as one motion
         self._committed_t0 = 0.0
         self._tracks: dict[int, tuple[float, float, ObstaclePrediction]] = {}  # id -> first, last stamp, last
@@ -95,6 +90,21 @@ class PassiveSafetyShield:
     @property
     def path(self):
         return getattr(self.planner, "path", None)
+
+    @property
+    def brake_accel(self) -> float:
+        """m/s^2: the deceleration the shield stops with (its committed stop, and the stop on invalid input
+        or an error): ShieldConfig.a_brake."""
+        return self.cfg.a_brake
+
+    def telemetry(self) -> dict:
+        """What the latest plan saw, for a log: ``path``, the wrapped planner's global path (K, 2) in world
+        x, y, or None; ``threats``, the people's reach discs the plan was checked against, (M, 3) x, y,
+        radius (None when that plan checked none: no map, or its input was invalid); ``forgotten``, where
+        the people it stopped remembering at that plan were predicted and why, [(x, y, reason)] with
+        reasons from FORGET_REASONS; ``brake_accel``, the deceleration it stops with."""
+        return {"path": self.path, "threats": self.threats, "forgotten": list(self.forgotten),
+                "brake_accel": self.brake_accel}
 
     # ------------------------------------------------------------------ what could be where
 
@@ -109,25 +119,11 @@ class PassiveSafetyShield:
         f = self._fields
         if f is not None and f["key"] == key and np.array_equal(f["raw"], raw):
             return f  # the map changed elsewhere than in this band
-        solid = raw
-        if inp.geofence is not None:
-            solid = solid | self._outside(inp, occ, key, raw.shape)
         res = occ.cfg.resolution
-        clear = distance_to(solid, res) - 0.5 * res if solid.any() else np.full(solid.shape, 1e3)
-        self._fields = {"key": key, "raw": raw, "clear": np.ascontiguousarray(clear), "solid": solid,
-                        "origin": occ.xy_origin, "res": res}
+        clear = static_clearance(raw, res, occ.xy_origin, inp.geofence, distance=opencv_distance)
+        self._fields = {"key": key, "raw": raw, "clear": np.ascontiguousarray(clear), "origin": occ.xy_origin,
+                        "res": res}
         return self._fields
-
-    def _outside(self, inp: PlannerInput, occ, key, shape) -> np.ndarray:
-        """(nx, ny) bool: the cells whose centres lie outside the geofence (kept while key and shape hold)."""
-        if self._fence is not None and self._fence[0] == key and self._fence[1] == shape:
-            return self._fence[2]
-        centres = occ.cell_to_world(np.argwhere(np.ones(shape, bool))).reshape(shape + (2,))
-        lo, hi = np.asarray(inp.geofence[0], float), np.asarray(inp.geofence[1], float)
-        out = ((centres[..., 0] < lo[0]) | (centres[..., 0] > hi[0]) | (centres[..., 1] < lo[1])
-               | (centres[..., 1] > hi[1]))
-        self._fence = (key, shape, out)
-        return out
 
     def _people(self, inp: PlannerInput):
         """Reach discs of the reported and the remembered moving obstacles: C0, Vp (M, 2), R0, G (M,)."""

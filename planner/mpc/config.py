@@ -1,4 +1,4 @@
-"""Settings of the linear MPC (planner.mpc); symbols as in that module's docstring."""
+"""Settings of the linear MPC (planner.mpc.solver); symbols as in that module's docstring."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,19 +41,9 @@ class MPCConfig:
     # (0.51 x 0.70 m: 0.43) plus room for a tilt, a few cm of tracking error and slack; ours
     geofence_scale: float = 3.0  # the geofence rows are scaled by this: a metre beyond the fence costs this many
     # metres of static slack, so a squeeze from moving obstacles is not resolved by flying into a side wall; ours
-    homotopy_obstacles: int = 1  # the nearest this many moving obstacles are tried on both sides (2^M QPs per
-    # call, the cheapest kept); ours, in the spirit of Intent-MPC's one solve per intent. 0: one QP, the
-    # side each obstacle is passed on inherited from the previous plan through its linearisation
-    homotopy_range: float = 2.0  # m; only obstacles whose ellipsoid comes this close to the plan
-    homotopy_trigger: float = 0.05  # m; the other sides are tried only when the side kept needs more dynamic
-    # slack than this somewhere (most calls then solve one QP)
-    homotopy_max_iter: int = 300  # the other sides are compared on solves this short...
-    homotopy_eps: float = 1e-2  # ...and this loose; the winner is then finished at eps_abs / eps_rel
-    homotopy_hysteresis: float = 0.1  # another side must cost this fraction less than the side kept...
-    homotopy_hysteresis_abs: float = 1.0  # ...and this much less (cost units: w_pos m^2)
     iterations: int = 1  # linearise-and-solve rounds per call
     warm_start: bool = True  # start OSQP from the previous solution shifted in time (False: from zero)
-    rho: float = 0.5  # OSQP initial ADMM step (adaptive after); ours, fewer iterations on bench_mpc than 0.1
+    rho: float = 0.5  # OSQP initial ADMM step (adaptive after); ours (docs/experiments.md)
     eps_abs: float = 1e-3  # OSQP tolerances; ours
     eps_rel: float = 1e-3
     max_iter: int = 4000

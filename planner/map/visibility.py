@@ -2,7 +2,7 @@
 
 A grid over the floor (the voxel map's columns) holds, per cell, the last time the camera saw through
 it at a person's height (``band``, world z) and found nobody: a ray of a depth frame crossed the cell
-before reaching what it hit. planner.shield forgets a person it no longer gets reports of once the
+before reaching what it hit. planner.shield.shield forgets a person it no longer gets reports of once the
 camera has seen that person's predicted place free. At the start, the place the drone starts from
 counts as seen free within ``reset``'s radius.
 

@@ -4,7 +4,7 @@ The grid is the voxel map's column view (a cell is blocked when any voxel of the
 is occupied, inflated by the robot size). Unknown space counts as free: the path is optimistic
 and the MPC, which sees the map too, keeps the drone off whatever appears. The search is an
 8-connected A* with the octile-distance heuristic (admissible, so the path is shortest on the
-grid), compiled with numba: a 160 x 40 grid takes well under a millisecond.
+grid), compiled with numba.
 """
 from __future__ import annotations
 
