@@ -146,7 +146,8 @@ def build_report(out: Path, split: str, seeds: list[int], cells: list[Cell], don
                      "episodes": agg["episodes"], "rates": agg["rates"],
                      "time_to_goal_median": agg["time_to_goal"].get("median"),
                      "min_person_clearance": _dist(person), "contact_speeds": agg["contact_speeds"],
-                     "failed_seeds": [r["seed"] for r in agg["per_seed"] if not r["success"]]})
+                     "failed_seeds": [r["seed"] for r in agg["per_seed"] if not r["success"]],
+                     "module_errors": agg["module_errors"]})
         envs += agg["environments"]
     return {"split": split, "seeds": [seeds[0], seeds[-1]], "seeds_per_cell": len(seeds), "commit": _commit(),
             "environments": distinct(envs), "cells": rows}
@@ -180,6 +181,11 @@ def markdown(report: dict) -> str:
         L += ["", "Drone speed at each contact [m/s], by fault class:", ""]
         for r, k, v in speeds:
             L.append(f"- {r['family']} / {r['people']} / {r['perception']}, {k}: " + ", ".join(f"{x:.2f}" for x in v))
+    errs = [(r, e["seed"]) for r in report["cells"] for e in r.get("module_errors") or []]
+    if errs:
+        L += ["", f"Episodes in which the planner or perception failed ({len(errs)}; each episode folder's "
+              "errors.txt has the first traceback): "
+              + "; ".join(f"{r['family']} / {r['people']} / {r['perception']} seed {seed}" for r, seed in errs)]
     envs = report.get("environments") or []
     if envs:
         L += ["", "Machine and installation: " + "; ".join(describe_environment(e) for e in envs)]

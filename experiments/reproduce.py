@@ -109,10 +109,11 @@ def _md_runtime_row(module: str, med, p95, paper, config: str) -> str:
 
 
 def reproduce(out: Path, quick: bool = False, jobs: int = 2, plan: Plan | None = None, scenario: str = "corridor",
-              settings=None, planner: str | None = None, perception: tuple[str, ...] = ()) -> Path:
+              settings=None, planner: str | None = None, perception: tuple[str, ...] = (), shield: bool = False) -> Path:
     """Run every part and write out/report.md; ``plan`` overrides the FULL / QUICK sizes (tests). settings
     (experiments.config) and planner (a ``module:Class`` spec, None: the default) apply to the navigation
-    sweeps; Tables I and II measure the DODT presets as they are. perception: ``module:Class`` specs of
+    sweeps (``shield``: the plug-in planner behind the passive-safety shield); Tables I and II measure the DODT
+    presets as they are. perception: ``module:Class`` specs of
     perception plug-ins, each flown in one more navigation sweep with as many seeds as dodt."""
     plan = plan or (QUICK if quick else FULL)
     if perception:
@@ -142,7 +143,7 @@ def reproduce(out: Path, quick: bool = False, jobs: int = 2, plan: Plan | None =
         t = time.perf_counter()
         print(f"== navigation sweep: {scenario}, {mode}, seeds 0:{n}", flush=True)
         agg = sweep.run_sweep(scenario, list(range(n)), mode, out / _folder(mode), jobs=jobs, settings=settings,
-                              planner=planner)
+                              planner=planner, shield=shield)
         plot_sweep(out / _folder(mode) / sweep.RESULTS, out / _folder(mode))
         nav[mode] = agg
         timings[f"navigation sweep ({mode}, {n} seeds)"] = time.perf_counter() - t

@@ -214,6 +214,11 @@ def cmd_benchmark(args) -> int:
         raise UserError(str(e)) from None
     print(benchmark.markdown(report))
     print(f"wrote {args.out}/report.md, {args.out}/report.json and {args.out}/plots/")
+    failed = sum(len(r.get("module_errors") or []) for r in report["cells"])
+    if failed:
+        print(f"error: the planner or perception failed in {failed} episodes (listed in {args.out}/report.md)",
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -245,5 +250,5 @@ def cmd_reproduce(args) -> int:
     config = settings(args, list(args.perception) or ["dodt"])
     output_folder(args.out)
     reproduce(Path(args.out), quick=args.quick, jobs=args.jobs, settings=config, planner=planner,
-              perception=tuple(args.perception))
+              perception=tuple(args.perception), shield=args.shield)
     return 0

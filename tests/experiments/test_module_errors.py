@@ -146,3 +146,12 @@ def test_a_summary_holds_the_whole_configuration_the_commit_and_the_timings(plug
 def test_a_plugin_name_is_recorded_beside_its_spec(plugins, tmp_path):
     rc, out, s = _run(tmp_path, "--perception", f"{plugins}:PerceptionRaises")
     assert s["perception_name"] == "broken-eyes" and s["perception"] == f"{plugins}:PerceptionRaises"
+
+
+def test_a_benchmark_lists_the_failed_episodes_and_exits_1(plugins, tmp_path, capsys):
+    out = tmp_path / "bench"
+    rc = main(["benchmark", "nav", "--split", "dev", "--seeds", "1", "--families", "static_clutter", "--people",
+               "blind", "--perception", "oracle", "--map", "truth", "--set", "episode.duration=0.5", "--jobs", "1",
+               "--quiet", "--planner", f"{plugins}:Raises", "--out", str(out)])
+    assert rc == 1 and "failed in 1 episodes" in capsys.readouterr().err
+    assert "static_clutter / blind / oracle seed" in (out / "report.md").read_text()
