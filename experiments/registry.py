@@ -36,10 +36,15 @@ PERCEPTION_METHODS = ("reset", "update")
 PLUGIN_SECTIONS = ("planner", "perception")
 
 
+# The map an override is checked against: an episode sizes its map to the scenario's corridor (this is the
+# shipped corridor's), then applies the map section
+CHECKED_MAP = MapConfig(origin=(-0.5, -2.5, -0.1), size=(17.0, 5.0, 3.2))
+
+
 def builtin_sections() -> dict[str, Any]:
     """The built-in sections and their default configurations (the dodt section's: the dodt preset)."""
     return {"episode": EpisodeConfig(), "shield": ShieldConfig(), "navigator": NavigatorConfig(),
-            "map": MapConfig(), "dodt": preset("dodt"), "moving_rule": MovingTrackRule(), "oracle": OracleConfig()}
+            "map": CHECKED_MAP, "dodt": preset("dodt"), "moving_rule": MovingTrackRule(), "oracle": OracleConfig()}
 
 
 def known_modes() -> tuple[str, ...]:

@@ -8,10 +8,11 @@ from pathlib import Path
 
 from sim.scenario import RENDERER_CHOICES, load_scenario
 
-from experiments.commands.common import (PERCEPTION_HELP, RENDERER_HELP, SCENARIO_HELP, LazyText, add_command,
-                                         add_episode_options, builtin_names, check_perception, check_planner,
-                                         describe, dodt_presets, episode_config, examples, output_folder, seconds,
-                                         seed, settings, whole)
+from experiments.commands.common import (PERCEPTION_HELP, RENDERER_HELP, SCENARIO_HELP, LazyText, UserError,
+                                         add_command, add_episode_options, builtin_names, check_perception,
+                                         check_planner, describe, dodt_presets, episode_config, examples,
+                                         output_folder, seconds, seed, settings, whole)
+from experiments.config import ConfigError
 
 RUN_EXAMPLES = examples(
     "dodt-nav run corridor --out runs/first --viz html",
@@ -112,8 +113,11 @@ def cmd_run(args) -> int:
 
         viewer = LiveViewer(corridor=sc.corridor, goal=sc.drone.goal)
     try:
-        s = run_episode(sc, seed=args.seed, perception=args.perception, planner=planner, out=out, cfg=cfg,
-                        on_frame=viewer, settings=config, shield=args.shield)
+        try:
+            s = run_episode(sc, seed=args.seed, perception=args.perception, planner=planner, out=out, cfg=cfg,
+                            on_frame=viewer, settings=config, shield=args.shield)
+        except ConfigError as e:  # a value that fits no map of this scenario (map.size, map.resolution)
+            raise UserError(str(e)) from None
         if viewer is not None and not args.no_wait and sys.stdin.isatty():
             input("episode finished; press Enter to stop the meshcat viewer ")
     finally:

@@ -35,6 +35,9 @@ def _logit(p: float) -> float:
     return float(np.float32(math.log(p / (1.0 - p))))
 
 
+MAX_MAP_CELLS = 50_000_000  # voxels: a map's arrays take about 20 bytes a voxel, so 1 GB at most
+
+
 @dataclass(frozen=True)
 class MapConfig:
     resolution: float = 0.1  # m, ref map_resolution
@@ -72,6 +75,10 @@ class MapConfig:
                 or self.ray_bundle_px % self.skip_pixel or self.static_after < 0 or self.protect_before < 0:
             raise ValueError("MapConfig: need skip_pixel >= 1, margin >= 0, dynamic_history >= 1, "
                              "static_after >= 0 and ray_bundle_px a non-negative multiple of skip_pixel")
+        cells = math.prod(max(round(x / self.resolution), 1) for x in self.size)
+        if cells > MAX_MAP_CELLS:
+            raise ValueError(f"MapConfig: size / resolution gives {cells:.3g} voxels, more than {MAX_MAP_CELLS:.0e} "
+                             f"(about 20 bytes each); a coarser resolution or a smaller size")
 
 
 @njit(cache=True, nogil=True)

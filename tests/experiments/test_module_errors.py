@@ -155,3 +155,10 @@ def test_a_benchmark_lists_the_failed_episodes_and_exits_1(plugins, tmp_path, ca
                "--quiet", "--planner", f"{plugins}:Raises", "--out", str(out)])
     assert rc == 1 and "failed in 1 episodes" in capsys.readouterr().err
     assert "static_clutter / blind / oracle seed" in (out / "report.md").read_text()
+
+
+def test_a_map_too_large_to_allocate_is_refused(tmp_path, capsys):
+    rc = main(["run", "corridor", "--out", str(tmp_path / "o"), "--set", "map.size=[200, 200, 3]",
+               "--set", "map.resolution=0.02"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "voxels, more than 5e+07" in err and err.count("\n") == 1
