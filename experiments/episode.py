@@ -179,7 +179,9 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
 
 
 class _Loop:
-    """One episode's closed loop, once its world and modules exist."""
+    """One episode's closed loop, once its world and modules exist: ``run`` sets up the map, the seen space
+    and the context, then alternates ``_perceive`` (each camera frame), ``_plan`` (each planning period)
+    and a control step until the goal, a crash or the time limit."""
 
     def __init__(self, sc, seed: int, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeConfig,
                  duration: float, on_frame, labels: dict, timer: CompileTimer):
@@ -190,105 +192,120 @@ class _Loop:
         self.planner = PlannerGuard(planner, labels["planner"])
         self.log = log
         self.started = time.perf_counter()
+        self.obstacles, self.obstacles_stamp = (), 0.0  # the latest moving obstacles perception reported
+        self.n_frames = 0
 
     def run(self, used: dict, settings: Settings) -> dict:
-        sc, world, cfg = self.sc, self.world, self.cfg
-        vmap = VoxelMap(configured(settings, "map", map_config_for(sc, world.vehicle.radius)))
-        known_map = cfg.static_map == "truth"
-        if known_map:
-            vmap.set_known(static_occupancy(sc, vmap.origin, vmap.dims, vmap.res))
-        seen = SeenSpace(vmap.xy_origin, tuple(vmap.dims[:2]), vmap.res, band=cfg.seen_band)
-        seen.reset(start_xy=np.asarray(sc.drone.start[:2], float), radius=cfg.launch_radius, stamp=0.0)
-        seen_blocked = vmap.column_blocked(*cfg.seen_band, inflate=False) if known_map else None
-        ctx = episode_context(sc, self.seed, world, cfg, self.duration, vmap, seen)
-        reset_with_context(self.perception.perception, ctx)
-        reset_with_context(self.raw_planner, ctx)
-        used = {**used, "map": vmap.cfg}
-        config = settings.record(used)
-        rec = EpisodeRecorder(self.log, cfg.map_snapshot_period, map_changes_stop=known_map)
+        world = self.world
+        ctx = self._setup(settings)
+        config = settings.record({**used, "map": self.vmap.cfg})
+        self._header(ctx, config)
         control_dt = world.dt * world.steps_per_control
-        plan_every = max(1, int(round(1.0 / (cfg.plan_rate * control_dt))))
-        rec.header(scenario=sc.name, source=sc.source, seed=self.seed, perception=self.labels["perception"],
-                   planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map,
-                   frame_latency=cfg.frame_latency,
-                   rates={"control": ctx.rates.control, "camera": sc.rates.camera, "plan": cfg.plan_rate,
-                          "map": ctx.rates.map},
-                   corridor={"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
-                   start=list(sc.drone.start), goal=ctx.goal.tolist(), map_resolution=vmap.cfg.resolution,
-                   map_origin=list(vmap.cfg.origin),
-                   camera={k: getattr(world.intrinsics, k) for k in ("width", "height", "fx", "fy", "cx", "cy")},
-                   static=[o.to_json() for o in world.obstacle_truth() if o.kind == "static"],
-                   people=[{"id": i, "height": round(w.height, 3), "sees_drone": bool(sees)}
-                           for i, w, sees in zip(world.person_ids, world.walkers, world.crowd.sees)],
-                   config=config)
-
-        goal = ctx.goal
-        obstacles, obstacles_stamp = (), 0.0
-        follower = TrajectoryFollower(float(sc.drone.yaw), cfg.max_yaw_rate, control_dt)
-        n_frames = 0
+        plan_every = max(1, int(round(1.0 / (self.cfg.plan_rate * control_dt))))
+        self.follower = TrajectoryFollower(float(self.sc.drone.yaw), self.cfg.max_yaw_rate, control_dt)
         reason, time_to_goal = "timeout", None
         frame, truth = world.latest_frame(), world.ground_truth()  # None until the first frame arrives (latency)
-        truth_for_perception = bool(getattr(self.perception.perception, "uses_ground_truth", False))
         k = 0
         while True:
             t = world.time
             if frame is not None:
-                c0, t0 = self.timer.seconds, time.perf_counter()
-                po = self.perception.update(frame, truth if truth_for_perception else None)
-                perc_ms = (time.perf_counter() - t0 - (self.timer.seconds - c0)) * 1e3
-                if po.skipped is None:
-                    obstacles, obstacles_stamp = po.obstacles, po.stamp
-                map_ms = None
-                if n_frames % cfg.map_every == 0:
-                    if known_map:
-                        seen.observe_map(seen_blocked, frame.intrinsics, frame.T_world_camera, frame.stamp,
-                                         occluders=[(o.center, o.size) for o in po.obstacles])
-                    else:
-                        depth_m, _ = frame.depth_m_counted()
-                        m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera,
-                                        dynamic_boxes=po.clear_boxes, stamp=frame.stamp)
-                        seen.observe_depth(depth_m, frame.intrinsics, frame.T_world_camera, frame.stamp)
-                        map_ms = m.get("ms")
-                n_frames += 1
-                rec.frame(frame.stamp, truth, po, perc_ms, map_ms)
-                rec.map_snapshot(t, vmap)
-                if self.on_frame is not None:
-                    self.on_frame({"t": frame.stamp, "frame": frame, "truth": truth, "perception": po, "map": vmap,
-                                   "trajectory": follower.trajectory, "T_world_body": truth.T_world_body,
-                                   "path": planner_telemetry(self.raw_planner).get("path")})
-
+                self._perceive(t, frame, truth)
             st = world.state()
             if not (np.all(np.isfinite(st.position)) and st.position[2] > CRASH_ALTITUDE or t < 0.5):
                 reason = "crashed"
                 break
-            if np.linalg.norm(st.position - goal) < GOAL_TOLERANCE:
+            if np.linalg.norm(st.position - ctx.goal) < GOAL_TOLERANCE:
                 reason, time_to_goal = "goal", t
                 break
             if t >= self.duration - 1e-9:
                 break
-
             if k % plan_every == 0:
-                inp = PlannerInput(stamp=t, position=st.position.copy(), velocity=st.velocity.copy(),
-                                   acceleration=follower.acceleration.copy(), goal=goal,
-                                   obstacles=_extrapolate(obstacles, obstacles_stamp, t), occupancy=vmap,
-                                   yaw=st.yaw, geofence=ctx.geofence, seen=seen)
-                c0 = self.timer.seconds
-                traj = self.planner.plan(inp)
-                compile_ms = (self.timer.seconds - c0) * 1e3
-                if compile_ms > 0.0:
-                    traj = replace(traj, solve_ms=max(traj.solve_ms - compile_ms, 0.0))
-                follower.follow(traj)
-                rec.plan(t, traj, len(inp.obstacles), planner_telemetry(self.raw_planner))
-
-            ref = follower.reference(t, st.position)
+                self._plan(t, st, ctx)
+            ref = self.follower.reference(t, st.position)
             frame = world.step(ref)
             truth = world.ground_truth() if frame is not None else truth
             k += 1
-            rec.step(world, ref.position)
+            self.rec.step(world, ref.position)
 
-        rec.end(world.time, reason, time_to_goal)
+        self.rec.end(world.time, reason, time_to_goal)
         summary = summarize_log(self.log.finish())
-        summary["map_voxels_occupied"] = int(vmap.occupied_count())
+        summary["map_voxels_occupied"] = int(self.vmap.occupied_count())
         summary["perception_name"] = self.labels["perception_name"]
         summary["config"] = config
         return summary
+
+    def _setup(self, settings: Settings) -> EpisodeContext:
+        """The static map (known from the start with ``static_map = truth``), the seen space, the recorder,
+        and the modules reset with the episode's context."""
+        sc, world, cfg = self.sc, self.world, self.cfg
+        self.vmap = vmap = VoxelMap(configured(settings, "map", map_config_for(sc, world.vehicle.radius)))
+        self.known_map = cfg.static_map == "truth"
+        if self.known_map:
+            vmap.set_known(static_occupancy(sc, vmap.origin, vmap.dims, vmap.res))
+        self.seen = seen = SeenSpace(vmap.xy_origin, tuple(vmap.dims[:2]), vmap.res, band=cfg.seen_band)
+        seen.reset(start_xy=np.asarray(sc.drone.start[:2], float), radius=cfg.launch_radius, stamp=0.0)
+        self.seen_blocked = vmap.column_blocked(*cfg.seen_band, inflate=False) if self.known_map else None
+        ctx = episode_context(sc, self.seed, world, cfg, self.duration, vmap, seen)
+        reset_with_context(self.perception.perception, ctx)
+        reset_with_context(self.raw_planner, ctx)
+        self.truth_for_perception = bool(getattr(self.perception.perception, "uses_ground_truth", False))
+        self.rec = EpisodeRecorder(self.log, cfg.map_snapshot_period, map_changes_stop=self.known_map)
+        return ctx
+
+    def _header(self, ctx: EpisodeContext, config: dict) -> None:
+        sc, world, cfg, vmap = self.sc, self.world, self.cfg, self.vmap
+        self.rec.header(
+            scenario=sc.name, source=sc.source, seed=self.seed, perception=self.labels["perception"],
+            planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map,
+            frame_latency=cfg.frame_latency,
+            rates={"control": ctx.rates.control, "camera": sc.rates.camera, "plan": cfg.plan_rate, "map": ctx.rates.map},
+            corridor={"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
+            start=list(sc.drone.start), goal=ctx.goal.tolist(), map_resolution=vmap.cfg.resolution,
+            map_origin=list(vmap.cfg.origin),
+            camera={k: getattr(world.intrinsics, k) for k in ("width", "height", "fx", "fy", "cx", "cy")},
+            static=[o.to_json() for o in world.obstacle_truth() if o.kind == "static"],
+            people=[{"id": i, "height": round(w.height, 3), "sees_drone": bool(sees)}
+                    for i, w, sees in zip(world.person_ids, world.walkers, world.crowd.sees)],
+            config=config)
+
+    def _perceive(self, t: float, frame, truth) -> None:
+        """One camera frame: perception (timed without numba's compilation), the map and the seen space
+        every ``map_every`` frames, the log, the viewer."""
+        cfg, vmap, seen = self.cfg, self.vmap, self.seen
+        c0, t0 = self.timer.seconds, time.perf_counter()
+        po = self.perception.update(frame, truth if self.truth_for_perception else None)
+        perc_ms = (time.perf_counter() - t0 - (self.timer.seconds - c0)) * 1e3
+        if po.skipped is None:
+            self.obstacles, self.obstacles_stamp = po.obstacles, po.stamp
+        map_ms = None
+        if self.n_frames % cfg.map_every == 0:
+            if self.known_map:
+                seen.observe_map(self.seen_blocked, frame.intrinsics, frame.T_world_camera, frame.stamp,
+                                 occluders=[(o.center, o.size) for o in po.obstacles])
+            else:
+                depth_m, _ = frame.depth_m_counted()
+                m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera, dynamic_boxes=po.clear_boxes,
+                                stamp=frame.stamp)
+                seen.observe_depth(depth_m, frame.intrinsics, frame.T_world_camera, frame.stamp)
+                map_ms = m.get("ms")
+        self.n_frames += 1
+        self.rec.frame(frame.stamp, truth, po, perc_ms, map_ms)
+        self.rec.map_snapshot(t, vmap)
+        if self.on_frame is not None:
+            self.on_frame({"t": frame.stamp, "frame": frame, "truth": truth, "perception": po, "map": vmap,
+                           "trajectory": self.follower.trajectory, "T_world_body": truth.T_world_body,
+                           "path": planner_telemetry(self.raw_planner).get("path")})
+
+    def _plan(self, t: float, st, ctx: EpisodeContext) -> None:
+        """One plan from the drone's state and the obstacles extrapolated to now; the follower flies it."""
+        inp = PlannerInput(stamp=t, position=st.position.copy(), velocity=st.velocity.copy(),
+                           acceleration=self.follower.acceleration.copy(), goal=ctx.goal,
+                           obstacles=_extrapolate(self.obstacles, self.obstacles_stamp, t), occupancy=self.vmap,
+                           yaw=st.yaw, geofence=ctx.geofence, seen=self.seen)
+        c0 = self.timer.seconds
+        traj = self.planner.plan(inp)
+        compile_ms = (self.timer.seconds - c0) * 1e3
+        if compile_ms > 0.0:
+            traj = replace(traj, solve_ms=max(traj.solve_ms - compile_ms, 0.0))
+        self.follower.follow(traj)
+        self.rec.plan(t, traj, len(inp.obstacles), planner_telemetry(self.raw_planner))
