@@ -18,7 +18,8 @@ import numpy as np
 
 from dodt.frames import CameraIntrinsics
 from sim.camera import load_egl, quiet_stdout, render_buffers
-from sim.gl_renderer import GLRenderer, GLUnavailable, GLUnsupportedScene, shared_context
+from sim import gl_renderer
+from sim.gl_renderer import GLRenderer, GLUnavailable, GLUnsupportedScene
 from sim.render_process import RenderProcess
 
 with quiet_stdout():  # PyBullet prints its build time on import
@@ -54,7 +55,7 @@ class RenderBackend:
             return b
         if render and want in ("auto", "gl"):
             try:
-                shared_context()  # made once per process, before any body: PyBullet's EGL plugin is the fallback
+                gl_renderer.shared_context()  # made once per process, before any body: PyBullet's EGL plugin is the fallback
                 b._want_gl = True
                 return b
             except GLUnavailable as e:

@@ -250,7 +250,7 @@ def test_pose_checks_decide_as_allclose_and_det():
 def test_json_rounding_is_round_of_float():
     import json
 
-    from dodt.result import _rounded
+    from dodt.protocol import _rounded
 
     rng = np.random.default_rng(4)
     for dtype in (np.float64, np.float32, np.int64):
