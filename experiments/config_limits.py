@@ -167,10 +167,10 @@ ANY_STRING = Limit(kind="string")
 
 # the code's own lists (module docstring)
 RENDERER_CHOICES = ("auto", "gl", "pybullet", "tiny", "egl")  # sim.scenario.RENDERER_CHOICES
-STATIC_MAPS = ("depth", "truth")  # experiments.episode.STATIC_MAPS
+STATIC_MAPS = ("depth", "truth")  # the static maps an episode can fly with (EpisodeConfig.static_map)
 LEARNED_LAYOUTS = ("auto", "dodt", "yolov8", "yolov5", "yolox")  # "auto" + dodt.learned.yolo.LAYOUTS
 LEARNED_VIEWS = ("full", "flip", "center", "center-flip")  # dodt.learned.views.VIEWS
-MAX_FRAME_LATENCY = 100  # camera periods, as the command line's --frame-latency
+MAX_FRAME_LATENCY = 100  # camera periods; the command line's --frame-latency has the same limit
 SEED_MAX = 2**63 - 1  # a TOML integer's largest, as the command line's seeds
 
 # Units in the comments; "0: off" where the field's comment makes 0 turn a rule off. Common bounds: speeds

@@ -69,10 +69,10 @@ def test_reproduce_options_reach_the_report(monkeypatch, tmp_path):
 
     calls = []
     monkeypatch.setattr(experiments.reproduce, "reproduce",
-                        lambda out, quick, jobs, settings, planner, perception:
-                        calls.append((out, quick, jobs, settings, planner, perception)))
+                        lambda out, quick, jobs, settings, planner, perception, shield:
+                        calls.append((out, quick, jobs, settings, planner, perception, shield)))
     assert main(["reproduce", "--out", str(tmp_path / "rep"), "--quick", "--jobs", "1"]) == 0
-    assert calls == [(tmp_path / "rep", True, 1, Settings(), None, ())]
+    assert calls == [(tmp_path / "rep", True, 1, Settings(), None, (), False)]
     assert main(["reproduce", "--out", str(tmp_path / "rep"), "--set", "shield.a_brake=3.0"]) == 0
     assert calls[-1][3].assignments() == {"shield.a_brake": 3.0}
     near = str(Path(__file__).resolve().parents[2] / "examples" / "custom_perception.py") + ":NearDODT"

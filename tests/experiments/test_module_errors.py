@@ -76,30 +76,27 @@ def test_a_planner_that_raises_is_shown_and_the_run_fails(plugins, tmp_path, cap
     assert s["planner_stats"]["errors"] == 10 and s["path_length"] < 0.3  # it braked and held
 
 
-@pytest.mark.parametrize("cls, fragment", [
-    ("WrongShape", "Trajectory.positions (N+1, 3) with N = 4: wrong shape (5, 2)"),
-    ("NaNStep", "Trajectory.dt: expected a finite number, got nan"),
-    ("Exits", "SystemExit"),
-])
-def test_malformed_planner_output_is_a_counted_error(plugins, tmp_path, capsys, cls, fragment):
-    rc, out, s = _run(tmp_path, "--planner", f"{plugins}:{cls}")
-    assert rc == 1 and s["module_errors"]["planner"]["count"] == 10
-    assert fragment in s["module_errors"]["planner"]["first"] and fragment in capsys.readouterr().err
-    assert s["path_length"] < 0.3
+FAILURES = [  # (option, class, what the error says)
+    ("--planner", "WrongShape", "Trajectory.positions (N+1, 3) with N = 4: wrong shape (5, 2)"),
+    ("--planner", "NaNStep", "Trajectory.dt: expected a finite number, got nan"),
+    ("--planner", "Exits", "SystemExit"),
+    ("--perception", "PerceptionRaises", "ValueError: my perception is broken"),
+    ("--perception", "PerceptionNone", "update() returned NoneType, not a dodt.protocol.PerceptionOutput"),
+    ("--perception", "BadTracks", "PerceptionOutput.tracks[0]: not a track"),
+]
 
 
-@pytest.mark.parametrize("cls, fragment", [
-    ("PerceptionRaises", "ValueError: my perception is broken"),
-    ("PerceptionNone", "update() returned NoneType, not a dodt.protocol.PerceptionOutput"),
-    ("BadTracks", "PerceptionOutput.tracks[0]: not a track"),
-])
-def test_a_failing_perception_module_skips_frames_and_the_run_fails(plugins, tmp_path, capsys, cls, fragment):
-    rc, out, s = _run(tmp_path, "--perception", f"{plugins}:{cls}")
-    assert rc == 1
-    e = s["module_errors"]["perception"]
-    assert e["count"] == s["perception_stats"]["frames"] >= 29 and fragment in e["first"]
-    assert s["perception_stats"]["skipped"] == e["count"]
-    assert fragment in capsys.readouterr().err
+@pytest.mark.parametrize("option, cls, fragment", FAILURES)
+def test_a_failing_or_malformed_module_is_a_counted_error(plugins, tmp_path, capsys, option, cls, fragment):
+    """A planner's failure is a brake-and-hold plan; a perception module's, a skipped frame."""
+    rc, out, s = _run(tmp_path, option, f"{plugins}:{cls}")
+    module = option[2:]
+    e = s["module_errors"][module]
+    assert rc == 1 and fragment in e["first"] and fragment in capsys.readouterr().err
+    if module == "planner":
+        assert e["count"] == s["planner_stats"]["plans"] == 10 and s["path_length"] < 0.3
+    else:
+        assert e["count"] == s["perception_stats"]["frames"] == s["perception_stats"]["skipped"] >= 29
 
 
 def test_a_sweep_counts_and_lists_the_errored_episodes(plugins, tmp_path, capsys):
