@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dodt.context import CameraSensor, EpisodeContext, Rates, VehicleLimits, reset_with_context
+from dodt.context import CameraSensor, EpisodeContext, Rates, VehicleLimits
 from experiments.compile_time import CompileTimer
 from experiments.config import Settings
 from experiments.environment import environment
@@ -246,8 +246,8 @@ class _Loop:
         seen.reset(start_xy=np.asarray(sc.drone.start[:2], float), radius=cfg.launch_radius, stamp=0.0)
         self.seen_blocked = vmap.column_blocked(*cfg.seen_band, inflate=False) if self.known_map else None
         ctx = episode_context(sc, self.seed, world, cfg, self.duration, vmap, seen)
-        reset_with_context(self.perception.perception, ctx)
-        reset_with_context(self.raw_planner, ctx)
+        self.perception.reset(ctx)
+        self.planner.reset(ctx)
         self.truth_for_perception = bool(getattr(self.perception.perception, "uses_ground_truth", False))
         self.rec = EpisodeRecorder(self.log, cfg.map_snapshot_period, map_changes_stop=self.known_map)
         return ctx

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from dodt.context import reset_with_context
 from dodt.protocol import PerceptionOutput, TrackReport
 from planner.fallback import brake_and_hold
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
@@ -165,6 +166,10 @@ class PlannerGuard:
         self.planner = planner
         self.errors = ModuleErrors("planner", label)
 
+    def reset(self, context) -> None:
+        """The planner's reset(context); a failure is counted, and the episode goes on (its plans are guarded)."""
+        _guarded(lambda: reset_with_context(self.planner, context), self.errors, 0.0)
+
     def plan(self, inp: PlannerInput) -> Trajectory:
         traj, kind = _guarded(lambda: check_trajectory(self.planner.plan(inp)), self.errors, inp.stamp)
         if traj is not None:
@@ -220,6 +225,10 @@ class PerceptionGuard:
     def __init__(self, perception, label: str):
         self.perception = perception
         self.errors = ModuleErrors("perception", label)
+
+    def reset(self, context) -> None:
+        """The module's reset(context); a failure is counted, and the episode goes on (its updates are guarded)."""
+        _guarded(lambda: reset_with_context(self.perception, context), self.errors, 0.0)
 
     def update(self, frame, truth) -> PerceptionOutput:
         out, kind = _guarded(lambda: check_output(self.perception.update(frame, truth)), self.errors, frame.stamp)

@@ -28,6 +28,10 @@ PLUGINS = textwrap.dedent('''
             return Trajectory(t0=inp.stamp, dt=float("nan"), positions=np.zeros((2, 3)), velocities=np.zeros((2, 3)),
                               accelerations=np.zeros((1, 3)))
 
+    class ResetRaises:
+        def reset(self, context): raise KeyError("no such thing")
+        def plan(self, inp): raise RuntimeError("unused")
+
     class Exits:
         def reset(self): pass
         def plan(self, inp): raise SystemExit(0)
@@ -80,6 +84,7 @@ FAILURES = [  # (option, class, what the error says)
     ("--planner", "WrongShape", "Trajectory.positions (N+1, 3) with N = 4: wrong shape (5, 2)"),
     ("--planner", "NaNStep", "Trajectory.dt: expected a finite number, got nan"),
     ("--planner", "Exits", "SystemExit"),
+    ("--planner", "ResetRaises", "KeyError: 'no such thing'"),
     ("--perception", "PerceptionRaises", "ValueError: my perception is broken"),
     ("--perception", "PerceptionNone", "update() returned NoneType, not a dodt.protocol.PerceptionOutput"),
     ("--perception", "BadTracks", "PerceptionOutput.tracks[0]: not a track"),
@@ -94,7 +99,7 @@ def test_a_failing_or_malformed_module_is_a_counted_error(plugins, tmp_path, cap
     e = s["module_errors"][module]
     assert rc == 1 and fragment in e["first"] and fragment in capsys.readouterr().err
     if module == "planner":
-        assert e["count"] == s["planner_stats"]["plans"] == 10 and s["path_length"] < 0.3
+        assert e["count"] - (cls == "ResetRaises") == s["planner_stats"]["plans"] == 10 and s["path_length"] < 0.3
     else:
         assert e["count"] == s["perception_stats"]["frames"] == s["perception_stats"]["skipped"] >= 29
 
