@@ -97,7 +97,11 @@ class LidarModel:
 
 
 def top_mount(height: float = TOP_MOUNT_HEIGHT) -> np.ndarray:
-    """(4, 4) T_body_sensor of a LiDAR on top of the body, ``height`` m above its centre, x forward."""
+    """(4, 4) T_body_sensor of a LiDAR on top of the body, ``height`` m above its centre, x forward.
+
+    Rays meet the drone's own collision box (its top lies 0.06 m above the centre) when the mount is lower
+    than about 0.113 m: the lowest rays (-7 deg) then return points on it, as a real sensor sees its carrier.
+    A sensor inside a collision shape does not see that shape (a ray leaving a convex shape does not hit it)."""
     T = np.eye(4)
     T[2, 3] = height
     return T

@@ -1,11 +1,15 @@
-"""The simulated LiDAR (sim.lidar): geometry against known bodies, limits, dropouts, determinism."""
+"""The simulated LiDAR (sim.lidar): geometry against known bodies, limits, dropouts, determinism, and the
+world's scans (walkers included; scanning leaves the world's run unchanged)."""
 import math
 
 import numpy as np
 import pytest
 
+from conftest import make_scenario
 from dodt.context import LidarSensor
+from sim import World
 from sim.camera import quiet_stdout
+from sim.controller import Reference
 from sim.lidar import (LidarModel, dropout_probability, ray_directions, scan_directions, simulate_scan,
                        top_mount)
 
@@ -158,3 +162,58 @@ def test_model_values_are_checked():
         LidarModel(min_range=50.0)
     with pytest.raises(ValueError, match="elevation"):
         LidarModel(elevation_min=0.5, elevation_max=0.2)
+
+
+# --------------------------------------------------------------------------- the world's LiDAR
+
+def standing(height, xy):
+    """A person standing at xy (a walk that starts after the test ends)."""
+    return (f'[[people]]\nbehaviour = "crossing"\nspeed = 1.0\nheight = {height}\nstart_delay = 100.0\n'
+            f'waypoints = [[{xy[0]}, {xy[1]}], [{xy[0] + 1.0}, {xy[1]}]]\n')
+
+
+def scene():
+    """The drone at x = 5 in the test corridor, one person 2 m behind it, one 1.4 m to its left."""
+    return make_scenario(standing(1.8, (3.0, 0.2)) + standing(1.7, (5.3, 1.4))).with_values(
+        {"drone.start": [5.0, 0.0, 1.2]})
+
+
+def test_the_worlds_scan_sees_walkers_behind_and_beside_the_drone():
+    w = World(scene(), seed=0, camera=False, render=False)
+    s = w.lidar_scan()
+    assert (s.seq, s.stamp, s.n_rays) == (0, 0.0, MODEL.points_per_scan)
+    np.testing.assert_allclose(s.T_world_sensor, w.T_world_body() @ top_mount())  # no odometry noise set
+    pts = s.points_world()
+    people = [o for o in w.obstacle_truth() if o.kind == "person"]
+    assert len(people) == 2
+    for o in people:  # the walker 2 m behind, and the one 1.4 m to the left
+        inside = np.all((pts >= o.aabb_min - 0.05) & (pts <= o.aabb_max + 0.05), axis=1)
+        assert inside.sum() > 50, (o.id, inside.sum())
+    assert np.abs(pts[:, 1]).max() < 2.0 + 0.1  # the corridor's walls bound it
+    assert w.lidar_scan().seq == 1
+
+
+def _run(world, scan_every):
+    out = []
+    for k in range(36):
+        f = world.step(Reference.hover([5.6, 0.6, 1.2]))
+        if scan_every and k % scan_every == 0:
+            out.append(world.lidar_scan().ranges)
+        if f is not None:
+            out.append((f.T_world_camera.tobytes(), f.stamp, [(o.id, o.aabb_min.tobytes()) for o in
+                                                             world.ground_truth().obstacles]))
+    st = world.state()
+    return out, st.position.tobytes(), st.R.tobytes(), list(world.clearance_log), list(world.collisions)
+
+
+def test_scanning_changes_nothing_else_the_world_does():
+    # odometry noise on, and the drone flown close to a walker, so that the query client is used for contacts
+    sc = scene().with_values({"noise.odom_position_std": 0.01, "noise.odom_rotation_std": 0.002})
+    plain = _run(World(sc, seed=2, camera=True, render=False), 0)
+    scanned, scanned_again = (_run(World(sc, seed=2, camera=True, render=False), 3) for _ in range(2))
+    frames = [x for x in scanned[0] if isinstance(x, tuple)]
+    assert frames == plain[0] and scanned[1:] == plain[1:]
+    assert plain[3] and min(r[2] for r in plain[3]) < 1.0  # a person was near enough to be measured
+    scans = [x for x in scanned[0] if not isinstance(x, tuple)]
+    scans_again = [x for x in scanned_again[0] if not isinstance(x, tuple)]
+    assert len(scans) == 12 and all(np.array_equal(a, b) for a, b in zip(scans, scans_again))
