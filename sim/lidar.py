@@ -6,8 +6,9 @@ reflectivity, range precision (1 sigma) about 2 cm. Sensor frame x forward, y le
 
 How a scan is made (``simulate_scan``): every ray of the scan's pattern is cast from the sensor's true
 pose with ``rayTestBatch`` against the collision shapes of the given PyBullet clients, each ray keeping
-its nearest hit over all of them; then, drawn from the generator passed in (the same number of draws
-every scan, whatever was hit):
+its nearest hit over all of them (or its hit is looked up by a caster passed in: sim.lidar_panorama's
+depth panoramas, several times faster); then, drawn from the generator passed in (the same number of
+draws every scan, whatever was hit):
 
 - range noise: normal, ``range_std``, along the ray;
 - dropout at grazing incidence: a return whose incidence angle theta (between the ray and the surface
@@ -42,6 +43,7 @@ from itertools import chain
 from operator import itemgetter
 
 import numpy as np
+from numba import njit
 
 from sim.camera import quiet_stdout
 
@@ -111,15 +113,31 @@ def scan_directions(model: LidarModel, scan_index: int) -> tuple[np.ndarray, np.
     """(azimuth, elevation), each (points_per_scan,) float64 radians, of the rays of scan ``scan_index``:
     the approximated non-repetitive pattern of the module's docstring. Azimuth in [-fov/2, fov/2) about
     the x axis, elevation in [elevation_min, elevation_max]."""
-    n, c = model.points_per_scan, model.channels
-    g = int(scan_index) * n + np.arange(n, dtype=np.int64)  # the ray's index since scan 0
-    channel = g % c
-    # turns done by the channel's beam, counted from scan 0, plus the channel's offset in azimuth
-    turns = (g // c) * (c * model.spins_per_scan / n) + channel / c
-    azimuth = model.horizontal_fov * (np.mod(turns, 1.0) - 0.5)
-    sweep = np.mod(model.zigzags_per_spin * turns + channel / (2 * c), 1.0)
-    elevation = model.elevation_min + (model.elevation_max - model.elevation_min) * (1.0 - np.abs(2.0 * sweep - 1.0))
-    return azimuth, elevation
+    return _scan_rays(model, scan_index)[:2]
+
+
+def _scan_rays(model: LidarModel, scan_index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(azimuth, elevation, unit directions (N, 3) in the sensor frame) of the rays of scan ``scan_index``."""
+    return _pattern(int(scan_index), model.points_per_scan, model.channels, float(model.spins_per_scan),
+                    float(model.zigzags_per_spin), float(model.horizontal_fov), float(model.elevation_min),
+                    float(model.elevation_max))
+
+
+@njit(cache=True, nogil=True)
+def _pattern(scan_index, n, c, spins, zigzags, fov, el_min, el_max):
+    azimuth, elevation, dirs = np.empty(n), np.empty(n), np.empty((n, 3))
+    for k in range(n):
+        g = scan_index * n + k  # the ray's index since scan 0
+        channel = g % c
+        # turns done by the channel's beam, counted from scan 0, plus the channel's offset in azimuth
+        turns = (g // c) * (c * spins / n) + channel / c
+        az = fov * (turns % 1.0 - 0.5)
+        sweep = (zigzags * turns + channel / (2 * c)) % 1.0
+        el = el_min + (el_max - el_min) * (1.0 - abs(2.0 * sweep - 1.0))
+        azimuth[k], elevation[k] = az, el
+        ce = math.cos(el)
+        dirs[k, 0], dirs[k, 1], dirs[k, 2] = ce * math.cos(az), ce * math.sin(az), math.sin(el)
+    return azimuth, elevation, dirs
 
 
 def ray_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
@@ -211,22 +229,28 @@ def cast_rays(clients, origin: np.ndarray, dirs: np.ndarray, reach: float) -> tu
 
 def simulate_scan(client, T_world_sensor: np.ndarray, model: LidarModel, rng: np.random.Generator,
                   scan_index: int, *, stamp: float = 0.0, T_world_sensor_reported: np.ndarray | None = None,
-                  seq: int | None = None) -> LidarScan:
+                  seq: int | None = None, caster=None) -> LidarScan:
     """One scan of ``model`` from the true sensor pose ``T_world_sensor`` (4, 4) in the PyBullet client
     ``client`` (or several clients, each ray keeping its nearest hit over all of them), the rays of
     pattern ``scan_index``, the noise and dropouts drawn from ``rng`` (see the module's docstring).
 
+    ``caster``, when given, finds the hits instead of rayTestBatch (``client`` is then not used): a callable
+    (T_world_sensor, ray directions (N, 3) in the sensor frame, reach) -> (range (N,) m, inf where nothing
+    was hit; unit surface normal (N, 3), world frame), as ``sim.lidar_panorama.PanoramaCaster``.
+
     The scan carries ``T_world_sensor_reported`` (the pose from odometry; default: the true pose), ``stamp``
     and ``seq`` (default: the scan index). The same generator state gives a bit-identical scan."""
-    clients = (client,) if isinstance(client, (int, np.integer)) else tuple(client)
     T = np.asarray(T_world_sensor, dtype=np.float64)
-    azimuth, elevation = scan_directions(model, scan_index)
-    d_sensor = ray_directions(azimuth, elevation)
+    azimuth, elevation, d_sensor = _scan_rays(model, scan_index)
     d_world = d_sensor @ T[:3, :3].T
     n = len(azimuth)
     noise = rng.standard_normal(n) * model.range_std
     draw = rng.random(n)
-    true_range, normal = cast_rays(clients, T[:3, 3].copy(), d_world, model.max_range)
+    if caster is None:
+        clients = (client,) if isinstance(client, (int, np.integer)) else tuple(client)
+        true_range, normal = cast_rays(clients, T[:3, 3].copy(), d_world, model.max_range)
+    else:
+        true_range, normal = caster(T, d_sensor, model.max_range)
     cos_incidence = np.minimum(np.abs(np.einsum("ij,ij->i", d_world, normal)), 1.0)
     dropped = draw < dropout_probability(model, np.arccos(cos_incidence))
     measured = true_range + noise

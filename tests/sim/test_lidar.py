@@ -5,18 +5,20 @@ import math
 import numpy as np
 import pytest
 
-from conftest import make_scenario
+from conftest import gl_available, make_scenario
 from dodt.context import LidarSensor
 from sim import World
 from sim.camera import quiet_stdout
 from sim.controller import Reference
-from sim.lidar import (LidarModel, dropout_probability, ray_directions, scan_directions, simulate_scan,
+from sim.lidar import (LidarModel, cast_rays, dropout_probability, ray_directions, scan_directions, simulate_scan,
                        top_mount)
+from sim.lidar_panorama import PanoramaCaster
 
 with quiet_stdout():
     import pybullet as p
 
 MODEL = LidarModel()
+METHODS = ["rays", pytest.param("panorama", marks=pytest.mark.skipif(not gl_available(), reason="no OpenGL here"))]
 
 
 @pytest.fixture
@@ -27,9 +29,12 @@ def client():
     p.disconnect(physicsClientId=c)
 
 
-def add_box(client, centre, half_extents):
+def add_box(client, centre, half_extents, yaw=0.0):
+    """A static box, collision and visual shape alike (rays hit the one, the gl renderer draws the other)."""
     shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half_extents), physicsClientId=client)
-    return p.createMultiBody(0, shape, basePosition=list(centre), physicsClientId=client)
+    look = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half_extents), physicsClientId=client)
+    return p.createMultiBody(0, shape, look, basePosition=list(centre),
+                             baseOrientation=p.getQuaternionFromEuler([0.0, 0.0, yaw]), physicsClientId=client)
 
 
 def room(client, half):
@@ -157,6 +162,26 @@ def test_grazing_returns_drop_out_by_the_stated_rule(client):
         assert abs(kept - expected) < 4 * math.sqrt(len(rays) * 0.25) + 2, (math.degrees(lo), kept, expected)
 
 
+@pytest.mark.skipif(not gl_available(), reason="the panorama draws with the gl renderer: no OpenGL here")
+def test_the_panorama_finds_the_hits_the_rays_find(client):
+    room(client, 6.0)
+    add_box(client, [2.0, 1.0, -1.0], [0.5, 0.3, 1.0], yaw=0.4)  # a box turned in the room: edges, slanted faces
+    T = pose((0.3, -0.2, 0.4), yaw=0.2)
+    d = ray_directions(*scan_directions(MODEL, 0))
+    ray_range, ray_normal = cast_rays((client,), T[:3, 3].copy(), d @ T[:3, :3].T, MODEL.max_range)
+    caster = PanoramaCaster(p, client, MODEL)
+    try:
+        pano_range, pano_normal = caster(T, d, MODEL.max_range)
+    finally:
+        caster.release()
+    assert np.isfinite(ray_range).all() and np.isfinite(pano_range).all()  # a closed room
+    err = np.abs(pano_range - ray_range)
+    # the same range to a millimetre but at the box's edges, where a pixel holds the one surface or the other
+    assert np.mean(err < 1e-3) > 0.99 and np.median(err) < 1e-4
+    same = err < 1e-3
+    assert np.mean(np.einsum("ij,ij->i", pano_normal[same], ray_normal[same]) > 0.999) > 0.99
+
+
 def test_model_values_are_checked():
     with pytest.raises(ValueError, match="min_range"):
         LidarModel(min_range=50.0)
@@ -178,9 +203,10 @@ def scene():
         {"drone.start": [5.0, 0.0, 1.2]})
 
 
-def test_the_worlds_scan_sees_walkers_behind_and_beside_the_drone():
+@pytest.mark.parametrize("method", METHODS)
+def test_the_worlds_scan_sees_walkers_behind_and_beside_the_drone(method):
     w = World(scene(), seed=0, camera=False, render=False)
-    s = w.lidar_scan()
+    s = w.lidar_scan(method=method)
     assert (s.seq, s.stamp, s.n_rays) == (0, 0.0, MODEL.points_per_scan)
     np.testing.assert_allclose(s.T_world_sensor, w.T_world_body() @ top_mount())  # no odometry noise set
     pts = s.points_world()
@@ -190,15 +216,16 @@ def test_the_worlds_scan_sees_walkers_behind_and_beside_the_drone():
         inside = np.all((pts >= o.aabb_min - 0.05) & (pts <= o.aabb_max + 0.05), axis=1)
         assert inside.sum() > 50, (o.id, inside.sum())
     assert np.abs(pts[:, 1]).max() < 2.0 + 0.1  # the corridor's walls bound it
-    assert w.lidar_scan().seq == 1
+    assert w.lidar_scan(method=method).seq == 1
+    w.close()
 
 
-def _run(world, scan_every):
+def _run(world, scan_every, method="rays"):
     out = []
     for k in range(36):
         f = world.step(Reference.hover([5.6, 0.6, 1.2]))
         if scan_every and k % scan_every == 0:
-            out.append(world.lidar_scan().ranges)
+            out.append(world.lidar_scan(method=method).ranges)
         if f is not None:
             out.append((f.T_world_camera.tobytes(), f.stamp, [(o.id, o.aabb_min.tobytes()) for o in
                                                              world.ground_truth().obstacles]))
@@ -206,11 +233,12 @@ def _run(world, scan_every):
     return out, st.position.tobytes(), st.R.tobytes(), list(world.clearance_log), list(world.collisions)
 
 
-def test_scanning_changes_nothing_else_the_world_does():
+@pytest.mark.parametrize("method", METHODS)
+def test_scanning_changes_nothing_else_the_world_does(method):
     # odometry noise on, and the drone flown close to a walker, so that the query client is used for contacts
     sc = scene().with_values({"noise.odom_position_std": 0.01, "noise.odom_rotation_std": 0.002})
     plain = _run(World(sc, seed=2, camera=True, render=False), 0)
-    scanned, scanned_again = (_run(World(sc, seed=2, camera=True, render=False), 3) for _ in range(2))
+    scanned, scanned_again = (_run(World(sc, seed=2, camera=True, render=False), 3, method) for _ in range(2))
     frames = [x for x in scanned[0] if isinstance(x, tuple)]
     assert frames == plain[0] and scanned[1:] == plain[1:]
     assert plain[3] and min(r[2] for r in plain[3]) < 1.0  # a person was near enough to be measured
