@@ -4,7 +4,8 @@ Prints medians; every figure is wall-clock time on this machine, single process.
 measured side by side on the same view: ours (gl), PyBullet's EGL plugin (pybullet) and PyBullet's
 TinyRenderer (tiny); a render call is the renderer's buffers decoded into metric depth and RGB, as a
 frame gets them (depth-only: gl's pass without colour). The LiDAR (sim.lidar, Mid-360-like) is timed
-as ``World.lidar_scan``: its rays cast with PyBullet's rayTestBatch, noise, dropouts and the scan message.
+as ``World.lidar_scan``, the hits found by each method (rays cast with PyBullet's rayTestBatch; looked up
+in depth panoramas drawn by the gl renderer), then noise, dropouts and the scan message.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import numpy as np
 
 from sim import World, load_scenario
 from sim.camera import RENDERERS, decode_render, quiet_stdout, render
+from sim.gl_renderer import GLUnavailable
 from sim.lidar import LidarModel
 
 with quiet_stdout():  # PyBullet prints its build time on import
@@ -71,14 +73,20 @@ def bench_physics(scenario: str, steps: int) -> dict:
 
 
 def bench_lidar(scenario: str, scans: int) -> dict:
-    """Median wall time of one LiDAR scan from the drone's start pose (each scan its own pattern)."""
+    """Median wall time of one LiDAR scan from the drone's start pose (each scan its own pattern), by method."""
     w = World(load_scenario(scenario), seed=0, render=False)
     model = LidarModel()
-    returns = []
-    ms = _median_ms(lambda: returns.append(len(w.lidar_scan(model))), scans)
+    out = {"model": model.name, "rays_per_scan": model.points_per_scan, "scan_rate_hz": model.scan_rate}
+    for method in ("rays", "panorama"):
+        returns = []
+        try:
+            ms = _median_ms(lambda: returns.append(len(w.lidar_scan(model, method=method))), scans)
+        except GLUnavailable as e:
+            out[method] = {"error": str(e)}
+            continue
+        out[method] = {"scan_ms_median": ms, "returns_median": int(np.median(returns))}
     w.close()
-    return {"model": model.name, "rays_per_scan": model.points_per_scan, "scan_ms_median": ms,
-            "returns_median": int(np.median(returns)), "scan_rate_hz": model.scan_rate}
+    return out
 
 
 def bench_realtime(scenario: str, seconds: float, segmentation: bool, renderer: str = "auto") -> dict:
@@ -132,9 +140,14 @@ def run(scenario: str = "corridor", seconds: float = 10.0, frames: int = 30, jso
     print(f"\nphysics step (rotor forces, stepSimulation, people at control rate, contacts): "
           f"median {ph['physics_step_us_median']:.1f} us, p95 {ph['physics_step_us_p95']:.1f} us")
     li = res["lidar"]
-    print(f"\nlidar scan ({li['model']}, {li['rays_per_scan']} rays, PyBullet rayTestBatch, noise, dropouts): "
-          f"median {li['scan_ms_median']:.1f} ms/scan, {li['returns_median']} returns; "
-          f"{li['scan_ms_median'] * li['scan_rate_hz'] / 10:.1f} % of one core at {li['scan_rate_hz']:g} Hz")
+    print(f"\nlidar scan ({li['model']}, {li['rays_per_scan']} rays, noise, dropouts), median ms/scan by method")
+    for method, what in (("rays", "PyBullet rayTestBatch"), ("panorama", "gl depth panorama")):
+        v = li[method]
+        if "error" in v:
+            print(f"  {method:<10}  unavailable: {v['error']}")
+        else:
+            print(f"  {method:<10}{v['scan_ms_median']:>8.1f} ms ({what}), {v['returns_median']} returns; "
+                  f"{v['scan_ms_median'] * li['scan_rate_hz'] / 10:.1f} % of one core at {li['scan_rate_hz']:g} Hz")
     print(f"\nclosed simulation loop flying the straight reference for {seconds:g} s:")
     for r in res["realtime"]:
         print(f"  segmentation {'on ' if r['segmentation'] else 'off'} ({r['renderer']}): real-time factor "
