@@ -67,6 +67,41 @@ class CameraSensor:
 
 
 @runtime_checkable
+class LidarModelView(Protocol):
+    """What a module may read of a LiDAR's model (``sim.lidar.LidarModel`` is one): its field of view and
+    range. Angles in the sensor frame (x forward, y left, z up), radians; ranges in metres."""
+
+    name: str
+    horizontal_fov: float  # rad, centred on the sensor's x axis (2 pi: all round)
+    elevation_min: float  # rad, the lowest ray (negative: below the sensor's xy plane)
+    elevation_max: float  # rad, the highest ray
+    min_range: float  # m: the blind zone; nearer surfaces give no return
+    max_range: float  # m: farther surfaces give no return
+    points_per_scan: int  # rays cast per scan
+
+
+@dataclass(frozen=True, eq=False)
+class LidarSensor:
+    """A 3D LiDAR on the body: its model, mount and rate."""
+
+    name: str  # e.g. "top"
+    model: LidarModelView
+    T_body_sensor: np.ndarray  # (4, 4) the sensor frame (x forward, y left, z up) in the body frame FLU
+    rate: float  # Hz: scans per second
+    kind: str = "lidar"
+
+    def in_view(self, points_sensor) -> np.ndarray:
+        """(N, 3) points in the sensor frame -> (N,) bool: within the field of view and range."""
+        q = np.asarray(points_sensor, dtype=np.float64).reshape(-1, 3)
+        m = self.model
+        r = np.linalg.norm(q, axis=1)
+        el = np.arcsin(np.clip(q[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
+        az = np.arctan2(q[:, 1], q[:, 0])
+        return ((r >= m.min_range) & (r <= m.max_range) & (el >= m.elevation_min) & (el <= m.elevation_max)
+                & (np.abs(az) <= 0.5 * m.horizontal_fov))
+
+
+@runtime_checkable
 class StaticMapView(Protocol):
     """Read-only queries of the episode's static voxel map (world frame, metres).
 

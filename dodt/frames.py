@@ -1,7 +1,8 @@
 """Sensor-side messages: what a robot (real or simulated) hands to perception.
 
 Only what a real robot has: depth, optional color, intrinsics, the camera pose from
-odometry and a timestamp. Ground truth never travels in these messages.
+odometry and a timestamp; a LiDAR's returns with the sensor pose from odometry and a
+timestamp. Ground truth never travels in these messages.
 """
 from __future__ import annotations
 
@@ -85,3 +86,39 @@ class SensorFrame:
         if n_bad:
             d[bad] = 0.0
         return d, n_bad
+
+
+@dataclass(frozen=True, eq=False)
+class LidarScan:
+    """One scan of a 3D LiDAR as a robot sees it: its returns, one row per point.
+
+    Sensor frame: x forward, y left, z up (the Livox convention). A ray's direction is
+    (cos el cos az, cos el sin az, sin el) for azimuth az (from x towards y) and elevation el
+    (up from the xy plane); its point is ``ranges * direction``. Rays that gave no return
+    (nothing within range, the blind zone, a dropout) have no row.
+
+    points: (N, 3) float32 metres, the returns in the sensor frame.
+    ranges: (N,) float32 metres from the sensor's origin.
+    azimuth, elevation: (N,) float32 radians of each return's ray.
+    stamp: time of the scan [s].
+    T_world_sensor: (4, 4) pose of the sensor frame in the world from odometry.
+    seq: scan counter.
+    n_rays: rays the scan cast, returns and misses together (>= N).
+    """
+
+    points: np.ndarray
+    ranges: np.ndarray
+    azimuth: np.ndarray
+    elevation: np.ndarray
+    stamp: float
+    T_world_sensor: np.ndarray
+    seq: int = 0
+    n_rays: int = 0
+
+    def __len__(self) -> int:
+        return int(self.ranges.shape[0])
+
+    def points_world(self) -> np.ndarray:
+        """(N, 3) float64 returns in the world frame, through ``T_world_sensor``."""
+        T = self.T_world_sensor
+        return self.points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]

@@ -1,9 +1,11 @@
-"""`dodt-nav bench sim`: render, physics and real-time figures of the simulator.
+"""`dodt-nav bench sim`: render, physics, LiDAR scan and real-time figures of the simulator.
 
 Prints medians; every figure is wall-clock time on this machine, single process. The renderers are
 measured side by side on the same view: ours (gl), PyBullet's EGL plugin (pybullet) and PyBullet's
 TinyRenderer (tiny); a render call is the renderer's buffers decoded into metric depth and RGB, as a
-frame gets them (depth-only: gl's pass without colour).
+frame gets them (depth-only: gl's pass without colour). The LiDAR (sim.lidar, Mid-360-like) is timed
+as ``World.lidar_scan``, the hits found by each method (rays cast with PyBullet's rayTestBatch; looked up
+in depth panoramas drawn by the gl renderer), then noise, dropouts and the scan message.
 """
 from __future__ import annotations
 
@@ -15,6 +17,8 @@ import numpy as np
 
 from sim import World, load_scenario
 from sim.camera import RENDERERS, decode_render, quiet_stdout, render
+from sim.gl_renderer import GLUnavailable
+from sim.lidar import LidarModel
 
 with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
@@ -68,6 +72,23 @@ def bench_physics(scenario: str, steps: int) -> dict:
     return {"physics_step_us_median": float(np.median(ts) * 1e6), "physics_step_us_p95": float(np.percentile(ts, 95) * 1e6)}
 
 
+def bench_lidar(scenario: str, scans: int) -> dict:
+    """Median wall time of one LiDAR scan from the drone's start pose (each scan its own pattern), by method."""
+    w = World(load_scenario(scenario), seed=0, render=False)
+    model = LidarModel()
+    out = {"model": model.name, "rays_per_scan": model.points_per_scan, "scan_rate_hz": model.scan_rate}
+    for method in ("rays", "panorama"):
+        returns = []
+        try:
+            ms = _median_ms(lambda: returns.append(len(w.lidar_scan(model, method=method))), scans)
+        except GLUnavailable as e:
+            out[method] = {"error": str(e)}
+            continue
+        out[method] = {"scan_ms_median": ms, "returns_median": int(np.median(returns))}
+    w.close()
+    return out
+
+
 def bench_realtime(scenario: str, seconds: float, segmentation: bool, renderer: str = "auto") -> dict:
     sc = load_scenario(scenario)
     w = World(sc, seed=0, segmentation=segmentation, renderer=renderer)
@@ -93,7 +114,8 @@ def run(scenario: str = "corridor", seconds: float = 10.0, frames: int = 30, jso
     cam = sc.camera
     res = {"scenario": scenario, "resolution": [cam.width, cam.height], "camera_hz": sc.rates.camera,
            "physics_hz": sc.rates.physics, "control_hz": sc.rates.control,
-           "render": bench_render(scenario, frames), "physics": bench_physics(scenario, 2400)}
+           "render": bench_render(scenario, frames), "physics": bench_physics(scenario, 2400),
+           "lidar": bench_lidar(scenario, frames)}
     loops = [("gl", False), ("gl", True), ("pybullet", False)]
     res["realtime"] = [bench_realtime(scenario, seconds, seg, r) for r, seg in loops
                        if "error" not in res["render"].get(r, {"error": ""})]
@@ -117,6 +139,15 @@ def run(scenario: str = "corridor", seconds: float = 10.0, frames: int = 30, jso
     ph = res["physics"]
     print(f"\nphysics step (rotor forces, stepSimulation, people at control rate, contacts): "
           f"median {ph['physics_step_us_median']:.1f} us, p95 {ph['physics_step_us_p95']:.1f} us")
+    li = res["lidar"]
+    print(f"\nlidar scan ({li['model']}, {li['rays_per_scan']} rays, noise, dropouts), median ms/scan by method")
+    for method, what in (("rays", "PyBullet rayTestBatch"), ("panorama", "gl depth panorama")):
+        v = li[method]
+        if "error" in v:
+            print(f"  {method:<10}  unavailable: {v['error']}")
+        else:
+            print(f"  {method:<10}{v['scan_ms_median']:>8.1f} ms ({what}), {v['returns_median']} returns; "
+                  f"{v['scan_ms_median'] * li['scan_rate_hz'] / 10:.1f} % of one core at {li['scan_rate_hz']:g} Hz")
     print(f"\nclosed simulation loop flying the straight reference for {seconds:g} s:")
     for r in res["realtime"]:
         print(f"  segmentation {'on ' if r['segmentation'] else 'off'} ({r['renderer']}): real-time factor "

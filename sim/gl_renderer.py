@@ -521,6 +521,22 @@ class GLRenderer:
         with _Current():
             return self._draw(data, name, color, segmentation)
 
+    def render_depth_views(self, T_world_cameras) -> np.ndarray:
+        """Depth buffers (V, H, W) float32 in [0, 1] seen from V optical-frame camera poses, the scene's poses
+        read from the client once: what ``render(T, color=False)`` gives for each pose, at less cost."""
+        if not self._passes:
+            raise RuntimeError("this GL renderer was released")
+        poses = self._part_poses()
+        data = self._part_data
+        out = np.empty((len(T_world_cameras), self.K.height, self.K.width), dtype=np.float32)
+        with _Current():
+            for k, T_world_camera in enumerate(T_world_cameras):
+                PV = self._P @ np.array(view_matrix(T_world_camera)).reshape(4, 4).T
+                for i, T in enumerate(poses):
+                    data[i, :4, :] = (PV @ T).T  # columns of the MVP
+                out[k] = self._draw(data, "depth", False, False)[1]
+        return out
+
     def _draw(self, data: np.ndarray, name: str, color: bool, segmentation: bool):
         self._tex.write(data.tobytes())
         vao, fbo = self._passes[name]

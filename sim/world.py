@@ -18,7 +18,8 @@ This module steps the world and hands out its frames; the parts it composes each
 sim.scene (building the bodies), sim.rotors (rotor dynamics and forces), sim.contacts (collision
 events and clearances), sim.odometry (the pose a frame carries), sim.render_backend (which renderer,
 and its resources), sim.frame_capture (depth noise, sensor units, delivery after a latency),
-sim.camera_paths (scripted camera paths).
+sim.camera_paths (scripted camera paths), sim.lidar (an optional 3D LiDAR: ``lidar_scan``, never called by
+the world itself).
 """
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ from sim.camera import quiet_stdout
 with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
 
-from dodt.frames import CameraIntrinsics, SensorFrame
+from dodt.frames import CameraIntrinsics, LidarScan, SensorFrame
 from sim.camera import renderer_name
 from sim.camera_paths import make_camera_path
 from sim.contacts import CLEARANCE_CAP, CLEARANCE_LOG_LEN, ContactMonitor
@@ -41,6 +42,8 @@ from sim.crowd import Crowd
 from sim.depth_noise import DepthNoiseModel
 from sim.frame_capture import Capture, FrameQueue, ImageFinisher
 from sim.ground_truth import GroundTruth, ObstacleTruth
+from sim.lidar import LidarModel, simulate_scan, top_mount
+from sim.lidar_panorama import PanoramaCaster
 from sim.odometry import OdometryNoise
 from sim.render_backend import RenderBackend
 from sim.rotors import Rotors
@@ -48,7 +51,11 @@ from sim.scenario import Scenario
 from sim.scene import build_scene
 from sim.vehicle import GRAVITY, load_vehicle
 
-__all__ = ["CLEARANCE_CAP", "CLEARANCE_LOG_LEN", "World"]
+__all__ = ["CLEARANCE_CAP", "CLEARANCE_LOG_LEN", "LIDAR_SEED_TAG", "World"]
+
+# The LiDAR's random streams come from SeedSequence([seed, LIDAR_SEED_TAG]), apart from the world's own
+# (SeedSequence(seed)): taking scans changes none of the numbers the rest of the world draws.
+LIDAR_SEED_TAG = 0x11DA2
 
 
 def _rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -113,6 +120,7 @@ class World:
         self.steps_per_control = r.physics // r.control
         self.steps_per_frame = r.physics // r.camera
         self._client = self._query_client = None
+        self._lidar_panorama = None  # (model, sim.lidar_panorama.PanoramaCaster) once a panorama scan was asked for
         try:
             self.reset()
         except BaseException:  # a world that fails to build closes what it started (the render process)
@@ -157,6 +165,11 @@ class World:
         self._finish_images = ImageFinisher(sc.camera, DepthNoiseModel(sc.noise, sc.camera.fx), rng_noise, seg_lut,
                                             self.color_on)
         self._odometry = OdometryNoise(sc.noise, rng_odom)
+        rng_lidar, rng_lidar_odom = (np.random.default_rng(s)
+                                     for s in np.random.SeedSequence([self.seed, LIDAR_SEED_TAG]).spawn(2))
+        self._lidar_rng = rng_lidar
+        self._lidar_odometry = OdometryNoise(sc.noise, rng_lidar_odom)
+        self._lidar_scans = 0
         self._frames = FrameQueue(self.frame_latency, self.intrinsics)
         self._contacts = ContactMonitor(scene, sc, self.vehicle, self.crowd, seg_lut)
         self._rotors = Rotors(self.vehicle)
@@ -177,6 +190,9 @@ class World:
     def close(self) -> None:
         if self._backend is not None:
             self._backend.close()
+        if getattr(self, "_lidar_panorama", None) is not None:
+            self._lidar_panorama[1].release()
+            self._lidar_panorama = None
         for cid in (self._client, self._query_client):
             if cid is not None:
                 try:
@@ -381,6 +397,45 @@ class World:
         capture = Capture(seq, self.time, images, self._odometry(T_true), T_true, T_body, self.state(),
                           self.obstacle_truth())
         return self._frames.add(capture, None if rp is None else rp.result)
+
+    # ------------------------------------------------------------------ lidar
+
+    def lidar_scan(self, model: LidarModel | None = None, T_body_sensor: np.ndarray | None = None,
+                   method: str = "rays") -> LidarScan:
+        """A scan of a 3D LiDAR on the drone, taken now (sim.lidar.simulate_scan): ``model`` (default
+        ``LidarModel()``, Mid-360-like) mounted at ``T_body_sensor`` (default ``top_mount()``, on top of the
+        body). It sees what the camera sees, all as it stands now. ``method`` "rays": rays cast against
+        collision shapes, the static world and the drone in the main client, the walkers' collidable copies
+        in the query client. "panorama": looked up in depth images of the main client's visual shapes drawn
+        around the sensor by the gl renderer (sim.lidar_panorama: faster; GLUnavailable without OpenGL).
+        The scan's pose is the true one with the scenario's odometry noise; its stamp the world's time; its
+        seq (and pattern index) counts the scans since ``reset``.
+
+        Nothing calls this but its user: a world that never scans runs exactly as before, and one that does
+        draws the same numbers everywhere else (the LiDAR's noise, dropouts and odometry come from their own
+        streams, LIDAR_SEED_TAG) and steps identically."""
+        if method not in ("rays", "panorama"):
+            raise ValueError(f"method: expected 'rays' or 'panorama', got {method!r}")
+        model = LidarModel() if model is None else model
+        T_bs = top_mount() if T_body_sensor is None else np.asarray(T_body_sensor, dtype=np.float64)
+        pos, quat = self._drone_pose()
+        T_true = self._T_from_pose(pos, quat) @ T_bs
+        caster = None
+        if method == "panorama":
+            if self._lidar_panorama is None or self._lidar_panorama[0] != model:
+                if self._lidar_panorama is not None:
+                    self._lidar_panorama[1].release()
+                    self._lidar_panorama = None
+                self._lidar_panorama = (model, PanoramaCaster(p, self._client, model))
+            caster = self._lidar_panorama[1]
+        else:
+            # the drone's copy in the query client stands where the drone is, as the contact monitor poses it
+            # before each of its own queries, so that rays there meet the drone where it is
+            p.resetBasePositionAndOrientation(self._scene.drone_proxy, pos, quat, physicsClientId=self._query_client)
+        seq = self._lidar_scans
+        self._lidar_scans += 1
+        return simulate_scan((self._client, self._query_client), T_true, model, self._lidar_rng, seq,
+                             stamp=self.time, T_world_sensor_reported=self._lidar_odometry(T_true), caster=caster)
 
     def obstacle_truth(self) -> tuple[ObstacleTruth, ...]:
         """Every obstacle's truth now (static ones and the people as posed at ``time``)."""

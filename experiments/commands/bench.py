@@ -36,8 +36,8 @@ DEFAULTS = {"--scenario": "corridor", "--seconds": 10.0, "--out": "runs/bench_pe
 def add_parser(sub) -> None:
     b = add_command(
         sub, "bench", help="benchmarks that print figures",
-        description="Measure and print figures; nothing here is a pass/fail test. sim: render, physics and "
-                    "real-time figures of the simulator, renderer by renderer. perception: every DODT "
+        description="Measure and print figures; nothing here is a pass/fail test. sim: render, physics, LiDAR "
+                    "scan and real-time figures of the simulator, renderer by renderer. perception: every DODT "
                     "configuration on the same simulated frames, scored against ground truth, laid out like the "
                     "paper's Table I (written to --out). runtime: per-module milliseconds per frame of one "
                     "configuration, like Table II. planner: voxel map update and MPC solve times, and the whole "
@@ -51,8 +51,8 @@ def add_parser(sub) -> None:
         ) + "\n\n" + dodt_presets()),
         func=cmd_bench)
     b.add_argument("what", choices=BENCHES,
-                   help="sim: render/physics/real-time; perception: Table I; runtime: Table II; planner: voxel map "
-                        "update, MPC and whole-planner times; loop: real-time factor of a closed-loop episode")
+                   help="sim: render/physics/LiDAR/real-time; perception: Table I; runtime: Table II; planner: "
+                        "voxel map update, MPC and whole-planner times; loop: real-time factor of a closed-loop episode")
     # Every option but "what" is None (--quick: False) unless given, so that cmd_bench can refuse one given to a
     # bench it does not apply to (APPLIES_TO); DEFAULTS holds the values of those that have one.
     def opt(flag: str, help: str, **kw) -> None:

@@ -174,6 +174,17 @@ def test_rendering_is_deterministic_and_a_new_world_in_the_process_renders_the_s
         renderer.render(T)
 
 
+def test_several_depth_views_at_once_are_the_views_one_by_one():
+    w = World(make_scenario(PEOPLE, PEOPLE_BASE), seed=0, renderer="gl")
+    poses = [_look_at(np.array([1.0, -1.8, 1.7]), [5.0, 0.0, 1.0]), _look_at(np.array([6.0, 1.5, 1.2]), [3.0, 0.0, 1.0])]
+    views = w._gl.render_depth_views(poses)
+    assert views.shape == (2, w.intrinsics.height, w.intrinsics.width)
+    for T, view in zip(poses, views):
+        np.testing.assert_array_equal(view, w._gl.render(T, color=False)[1])
+    assert not np.array_equal(views[0], views[1])
+    w.close()
+
+
 def test_depth_only_frames_have_the_same_depth():
     sc = make_scenario(PEOPLE.replace(NO_NOISE, ""), PEOPLE_BASE)  # with depth noise
     a = World(sc, seed=2, renderer="gl", segmentation=True)
