@@ -210,3 +210,22 @@ def test_a_sweep_records_the_perception_sections(tmp_path):
     c = json.loads((out / "summary.json").read_text())["config"]
     assert c["set"] == {"episode.duration": 1, "oracle.memory": 0.5}
     assert c["oracle"]["memory"] == 0.5 and c["oracle"]["velocity_noise"] == 0.3
+
+
+@pytest.mark.parametrize("make, fragment", [
+    (lambda d: "/dev/zero", "is not a regular file"),
+    (lambda d: _write(d / "deep.toml", "a = " + "[" * 100_000 + "]" * 100_000), "nested too deep"),
+    (lambda d: _write(d / "tables.toml", "[" + ".".join("t" * 1 for _ in range(12)) + "]\nx = 1\n"),
+     "nested more than 8 deep"),
+    (lambda d: _write(d / "big.toml", "# " + "x" * (1 << 20) + "\n"), "larger than 1 MiB"),
+])
+def test_hostile_config_files_are_one_line_errors(tmp_path, capsys, make, fragment):
+    path = make(tmp_path)
+    rc = main(["run", "corridor", "--out", str(tmp_path / "o"), "--config", str(path)])
+    err = capsys.readouterr().err
+    assert rc == 2 and fragment in err and err.count("\n") == 1
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
