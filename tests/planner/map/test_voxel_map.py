@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "dodt"))  # tests/dodt/synthetic.py
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "dodt"))  # tests/dodt/synthetic.py
 
 from dodt.frames import CameraIntrinsics  # noqa: E402
 from planner.map.voxel_map import MapConfig, VoxelMap  # noqa: E402
