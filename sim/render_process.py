@@ -7,6 +7,11 @@ renders, adds the depth noise and sends the frame's images back over a socket (d
 colour, obstacle ids). Requests are answered in order, so the child draws the noise frame after
 frame in capture order, as the parent would: the frames are bit-identical to rendering in the
 parent (tested), and the parent spends no time on noise.
+At most one request is on the socket at a time: the parent keeps the later ones (one per frame of
+latency) and sends the next once the child has answered the last. The child sends its answer before it
+reads its next request; with many requests sent ahead, they and its answer would fill the socket's
+buffers both ways and both sides would wait for good on sending. Every wait on the socket is bounded
+(``_REPLY_TIMEOUT_S``): a child that stops answering is an error, not a hang.
 The child runs sim.render_child, which this module does not import: the parent's side does not
 depend on sim.world.
 
@@ -23,7 +28,9 @@ Every world starts from its scenario and seed alone, so its frames are those a f
 from __future__ import annotations
 
 import os
+import pickle
 import socket
+import struct
 import subprocess
 import sys
 from multiprocessing.connection import Connection
@@ -31,7 +38,7 @@ from multiprocessing.connection import Connection
 import numpy as np
 
 _START_TIMEOUT_S = 120.0  # building the child's world: a few seconds at most when the machine is idle
-_REPLY_TIMEOUT_S = 120.0  # one frame: tens of milliseconds
+_REPLY_TIMEOUT_S = 120.0  # one frame: tens of milliseconds; also any one read or write stalled on the socket
 
 
 class RenderProcessError(RuntimeError):
@@ -56,6 +63,12 @@ def _spawn() -> tuple[subprocess.Popen, Connection]:
     """A fresh interpreter (no PyBullet/EGL or thread state copied from us, and, unlike multiprocessing's
     spawn, no re-import of the user's main script) on one end of a socket pair."""
     ours, theirs = socket.socketpair()
+    # Our end's reads and writes give up (BlockingIOError) after this long without progress (the kernel's
+    # SO_RCVTIMEO/SO_SNDTIMEO, a struct timeval): a child that stops reading or stops mid-answer is an error.
+    whole = int(_REPLY_TIMEOUT_S)
+    timeval = struct.pack("@ll", whole, int((_REPLY_TIMEOUT_S - whole) * 1e6))
+    ours.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, timeval)
+    ours.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, timeval)
     env = dict(os.environ)
     # Mesa's llvmpipe rasterises on extra threads by default; beside a busy parent on two cores they only
     # contend. A user's setting wins.
@@ -76,7 +89,9 @@ class RenderProcess:
                  color: bool = True):
         # A child released by an earlier world of this process builds this one (a second or so of start-up
         # saved per episode); a fresh one is started when there is none, or when the released one fails.
-        self._outstanding: list[int] = []
+        self._outstanding: list[int] = []  # frames submitted and not yet read, in order
+        self._unsent: list[bytes] = []  # the latest of them, pickled, not sent yet: at most one is on the socket
+        self._on_socket = False  # a request sent and not yet answered
         self.render_wall_time = 0.0
         self._healthy = False
         config = (scenario, seed, renderer, segmentation, light_direction, color)
@@ -107,32 +122,56 @@ class RenderProcess:
 
     def _recv(self, timeout: float, doing: str):
         if not self._conn.poll(timeout):
-            raise RenderProcessError(f"the render process did not answer within {timeout:.0f} s ({doing})")
+            raise self._stalled(doing, timeout)
         try:
             msg = self._conn.recv()
+        except BlockingIOError:
+            raise self._stalled(doing) from None
         except (EOFError, OSError):
-            raise RenderProcessError(f"the render process stopped ({doing}; exit code {self._proc.poll()})") \
-                from None
+            raise self._stopped(doing) from None
         if msg[0] == "error":
             raise RenderProcessError(f"the render process failed ({doing}): {msg[1]}")
         return msg[0], msg[1:] if len(msg) > 2 else msg[1]
 
+    def _stopped(self, doing: str) -> RenderProcessError:
+        return RenderProcessError(f"the render process stopped ({doing}; exit code {self._proc.poll()})")
+
+    @staticmethod
+    def _stalled(doing: str, timeout: float | None = None) -> RenderProcessError:
+        """The error for a wait on the child that ran out (by default, a read or write on the socket)."""
+        timeout = _REPLY_TIMEOUT_S if timeout is None else timeout
+        return RenderProcessError(f"the render process did not answer within {timeout:.0f} s ({doing})")
+
     def submit(self, seq: int, t: float, pos, quat, people, light_direction) -> None:
         """Frame ``seq`` captured at sim time t: the drone's pose and the people's (sim.people.WalkerPose)."""
         light = None if light_direction is None else [float(x) for x in light_direction]
+        # pickled now, as it stands at capture; sent when the child has answered the requests before it
+        self._unsent.append(pickle.dumps((seq, float(t), tuple(pos), tuple(quat), list(people), light)))
+        self._outstanding.append(seq)
+        self._send_next()
+
+    def _send_next(self) -> None:
+        """Sends the oldest unsent request, unless one is on the socket already: the child, having answered
+        every earlier one, reads it, so sending it never waits on the child's sending."""
+        if self._on_socket or not self._unsent:
+            return
         healthy, self._healthy = self._healthy, False  # until the request is whole (not cut by Ctrl-C)
         try:
-            self._conn.send((seq, float(t), tuple(pos), tuple(quat), list(people), light))
+            self._conn.send_bytes(self._unsent[0])
+        except BlockingIOError:
+            raise self._stalled("taking a request") from None
         except (BrokenPipeError, OSError):
             raise RenderProcessError(f"the render process stopped (exit code {self._proc.poll()})") from None
+        self._unsent.pop(0)
+        self._on_socket = True
         self._healthy = healthy
-        self._outstanding.append(seq)
 
     def result(self, seq: int) -> tuple[np.ndarray | None, ...]:
         """The images of frame ``seq`` (``World.images_at``): depth in mm with the depth noise, colour or
         None, obstacle ids or None."""
         if not self._outstanding or self._outstanding[0] != seq:
             raise RenderProcessError(f"frame {seq} asked out of order (outstanding: {self._outstanding[:3]})")
+        self._send_next()  # (sent already, unless an earlier send failed)
         # the connection is in step with the child again only once the whole frame is read: a reply cut
         # short (an error, Ctrl-C) leaves the child to be ended, not released
         healthy, self._healthy = self._healthy, False
@@ -148,9 +187,16 @@ class RenderProcess:
                 continue
             dtype, shape = spec
             a = np.empty(shape, dtype=np.dtype(dtype))
-            self._conn.recv_bytes_into(memoryview(a).cast("B"))
+            try:
+                self._conn.recv_bytes_into(memoryview(a).cast("B"))
+            except BlockingIOError:
+                raise self._stalled(f"sending frame {seq}") from None
+            except (EOFError, OSError):
+                raise self._stopped(f"sending frame {seq}") from None
             out.append(a)
+        self._on_socket = False
         self._healthy = healthy
+        self._send_next()  # the child renders the next frame while the caller uses this one
         return tuple(out)
 
     def close(self) -> None:
@@ -158,6 +204,9 @@ class RenderProcess:
         or ends it when it failed or enough children wait already."""
         if self._proc is None:
             return
+        # requests not sent yet are dropped; the one on the socket is read
+        del self._outstanding[len(self._outstanding) - len(self._unsent):]
+        self._unsent.clear()
         try:
             while self._healthy and self._outstanding:
                 self.result(self._outstanding[0])

@@ -1,4 +1,11 @@
 """Frame latency and rendering in a second process (sim.render_process)."""
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
 import numpy as np
 import pytest
 
@@ -104,3 +111,47 @@ def test_a_render_process_whose_reply_was_cut_short_is_ended_not_released():
             rp.result(seq)
     assert proc.wait(timeout=20) is not None  # ended with its world
     assert all(p is not proc for p, _ in render_process._IDLE)
+
+
+def test_the_longest_latency_with_a_crowd_does_not_hang():
+    """frame_latency 100 (the most a run takes) with 30 walkers: a hundred requests in flight, each with
+    30 poses, and the child's answers, whole images, once filled the socket both ways and both processes
+    waited for good. In a subprocess, so that a hang fails the test instead of stopping the suite."""
+    code = textwrap.dedent("""
+        from sim import World
+        from sim.controller import Reference
+        from sim.scenario import parse_scenario, scenario_path
+        text = scenario_path("corridor4").read_text()
+        walker = "[[people]]" + text.split("[[people]]")[1].split("[drone]")[0]
+        crowd = parse_scenario(text + walker * 26)
+        assert len(crowd.people) == 30
+        seqs = []
+        with World(crowd, seed=0, frame_latency=100, render_process=True) as w:
+            while len(seqs) < 3:
+                f = w.step(Reference.hover([3.0, 0.3, 1.2]))
+                if f is not None:
+                    seqs.append(f.seq)
+        print(seqs)
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "[0, 1, 2]"
+
+
+@pytest.mark.timeout(60)  # a wait without a bound fails here instead of stopping the suite
+def test_a_render_process_stalled_mid_answer_is_a_clear_error(monkeypatch):
+    from sim import render_process
+
+    monkeypatch.setattr(render_process, "_REPLY_TIMEOUT_S", 1.0)  # read by the socket of a fresh child
+    monkeypatch.setattr(render_process, "_IDLE", [])
+    with World(load_scenario("corridor"), seed=0, frame_latency=1, render_process=True) as w:
+        rp = w._render_proc
+        assert rp._conn.poll(30)  # frame 0's answer has begun; its images, larger than the socket's buffer, wait
+        time.sleep(0.5)
+        os.kill(rp._proc.pid, signal.SIGSTOP)  # the child stops in the middle of sending them
+        try:
+            with pytest.raises(RenderProcessError, match=r"did not answer within 1 s \(sending frame 0\)"):
+                for _ in range(8):
+                    w.step(REF)
+        finally:
+            os.kill(rp._proc.pid, signal.SIGCONT)
