@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from experiments.environment import differences, distinct
-from experiments.sweep import RESULTS, read_results, wilson
+from experiments.sweep import RESULTS, SweepError, read_results, wilson
 
 
 # (row label, results field) of each outcome class compared seed by seed
@@ -104,7 +104,10 @@ def _load(folder: Path) -> dict[int, dict]:
     path = folder / RESULTS if folder.is_dir() else folder
     if not path.is_file():
         raise CompareError(f"{folder}: no {RESULTS} (a folder written by dodt-nav sweep --out, or the file itself)")
-    rows = read_results(path)
+    try:
+        rows = read_results(path)
+    except SweepError as e:
+        raise CompareError(str(e)) from None
     if not rows:
         raise CompareError(f"{path}: no finished episode in it")
     return rows

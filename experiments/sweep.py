@@ -37,6 +37,9 @@ class SweepError(ValueError):
     """A user mistake in a sweep request (reported in one line by the CLI)."""
 
 
+MAX_SEEDS = 1_000_000  # episodes one command may start
+
+
 def parse_seeds(text: str) -> list[int]:
     """'0:200' (start:stop), '3', or '1,4,9' -> sorted unique seeds."""
     out: set[int] = set()
@@ -48,9 +51,11 @@ def parse_seeds(text: str) -> list[int]:
                 lo, hi = int(a), int(b)
                 if hi <= lo:
                     raise SweepError(f"--seeds: empty range {part!r} (stop must be greater than start)")
-                if hi - lo > 1_000_000:
-                    raise SweepError(f"--seeds: range {part!r} is longer than 1000000 seeds")
+                if hi - lo > MAX_SEEDS:
+                    raise SweepError(f"--seeds: range {part!r} is longer than {MAX_SEEDS} seeds")
                 out.update(range(lo, hi))
+                if len(out) > MAX_SEEDS:
+                    raise SweepError(f"--seeds: {text!r} names more than {MAX_SEEDS} seeds in all")
             elif part:
                 out.add(int(part))
     except ValueError as e:
@@ -88,19 +93,36 @@ def run_one(scenario, seed: int, perception: str, episodes_dir: str, keep_log: b
     return s
 
 
+RESULT_KEYS = ("seed",)  # what every results row (an episode summary, a JSON object) holds at least
+
+
 def read_results(path: Path) -> dict[int, dict]:
-    """Seed -> summary from a results file; a line cut short by a kill is ignored."""
+    """Seed -> summary from a results file; a line cut short by a kill is ignored, and a file that is not a
+    results file (not UTF-8 text, rows that are not episode summaries, seeds that are not whole numbers)
+    is a SweepError naming the file and the line."""
     done: dict[int, dict] = {}
     if not path.exists():
         return done
-    with open(path, encoding="utf-8") as fh:
-        for line in fh:
-            try:
-                r = json.loads(line)
-            except json.JSONDecodeError:
-                continue  # the last line of a killed run
-            if isinstance(r, dict) and "seed" in r:
-                done[int(r["seed"])] = r
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for n, line in enumerate(fh, 1):
+                try:
+                    r = json.loads(line)
+                except json.JSONDecodeError:
+                    continue  # the last line of a killed run
+                except RecursionError:
+                    raise SweepError(f"{path}, line {n}: nested too deep; not a results file") from None
+                seed = r.get("seed") if isinstance(r, dict) else None
+                if not isinstance(r, dict) or any(k not in r for k in RESULT_KEYS):
+                    raise SweepError(f"{path}, line {n}: not an episode summary (a results file holds one per "
+                                     f"line, written by dodt-nav sweep)")
+                if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= SEED_MAX:
+                    raise SweepError(f"{path}, line {n}: seed {seed!r} is not a whole number in [0, {SEED_MAX}]")
+                done[seed] = r
+    except UnicodeDecodeError as e:
+        raise SweepError(f"{path}: not UTF-8 text (byte {e.start}); not a results file") from None
+    except OSError as e:
+        raise SweepError(f"{path}: cannot read it: {e.strerror or e}") from None
     return done
 
 

@@ -94,8 +94,15 @@ def writable_file(path: str, option: str) -> None:
         p.unlink()
 
 
+def nonempty_path(path: str, option: str = "--out") -> None:
+    """An empty path would mean the current folder: refused."""
+    if not str(path).strip():
+        raise UserError(f"{option}: an empty path; name the output folder")
+
+
 def output_folder(path: str, option: str = "--out") -> Path:
     """The output folder, created now (a file in the way or no permission: refused before the work)."""
+    nonempty_path(path, option)
     p = Path(path)
     try:
         p.mkdir(parents=True, exist_ok=True)

@@ -10,7 +10,7 @@ from sim.scenario import ScenarioError, load_scenario
 from experiments.commands.common import (PERCEPTION_HELP, LazyText, UserError, add_command,
                                          add_config_options, add_episode_options, builtin_names, check_perception,
                                          check_planner, default_jobs, episode_config, examples, fraction, jobs,
-                                         output_folder, real, settings, whole, writable_file)
+                                         nonempty_path, output_folder, real, settings, whole, writable_file)
 
 SWEEP_EXAMPLES = examples(
     "dodt-nav sweep corridor --seeds 0:100 --out runs/sweep",
@@ -131,6 +131,7 @@ def cmd_sweep(args) -> int:
     from experiments import sweep
 
     load_scenario(args.scenario)  # validate before starting workers
+    nonempty_path(args.out)
     check_perception(args.perception)
     planner = check_planner(args.planner)
     config = settings(args)
@@ -186,6 +187,7 @@ def cmd_benchmark(args) -> int:
                             if known else f"--{option}: {text!r} names nothing")
         return tuple(out)
 
+    nonempty_path(args.out)
     families = names(args.families, None, "families") if args.families else benchmark.FAMILIES
     for f in families:
         try:

@@ -543,3 +543,44 @@ def test_progress_bar_writes_nothing_unless_a_terminal():
         bar.close()
         text = stream.getvalue()
         assert bool(text) is shown and (not shown or ("2/3" in text and "1 failed" in text))
+
+
+@pytest.mark.parametrize("rows, fragment", [
+    ('["seed", 3]\n', "line 1: not an episode summary"),
+    (None, "line 1: seed 'abc' is not a whole number"),
+    (None, "line 1: seed None is not a whole number"),
+    (None, "line 1: seed 1e+400"),
+])
+def test_a_broken_results_file_is_one_line_for_sweep_and_compare(tmp_path, capsys, rows, fragment):
+    from experiments.cli import main
+    from experiments.sweep import RESULT_KEYS
+
+    seed = {"line 1: seed 'abc' is not a whole number": '"abc"', "line 1: seed None is not a whole number": "null",
+            "line 1: seed 1e+400": "1e400"}.get(fragment)
+    if rows is None:
+        rows = "{" + ", ".join(f'"{k}": {seed if k == "seed" else "null"}' for k in RESULT_KEYS) + "}\n"
+    folder = tmp_path / "s"
+    folder.mkdir()
+    (folder / "results.jsonl").write_text(rows)
+    for argv in (["compare", str(folder), str(folder)],
+                 ["sweep", "corridor", "--seeds", "0:1", "--quiet", "--out", str(folder)]):
+        rc = main(argv)
+        err = capsys.readouterr().err
+        assert rc == 2 and fragment.replace("1e+400", "inf") in err.replace("1e+400", "inf") \
+            and err.count("\n") == 1, (argv, err)
+
+
+def test_a_results_file_that_is_not_utf8_and_too_many_seeds_are_one_line(tmp_path, capsys):
+    from experiments.cli import main
+
+    folder = tmp_path / "s"
+    folder.mkdir()
+    (folder / "results.jsonl").write_bytes(b"\xff\xfe\x00garbage\n")
+    assert main(["compare", str(folder), str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert "not UTF-8 text" in err and err.count("\n") == 1
+    assert main(["sweep", "corridor", "--seeds", "0:1000000,2000000:3000000", "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err
+    assert "more than 1000000 seeds in all" in err and err.count("\n") == 1
+    assert main(["run", "corridor", "--out", ""]) == 2
+    assert "--out: an empty path" in capsys.readouterr().err
