@@ -40,7 +40,7 @@ from experiments.registry import (DEFAULT_PLANNER, behind_shield, configured, ma
                                   perception_sections, planner_label, planner_sections, plugin_sections)
 from planner.map.visibility import SeenSpace
 from planner.map.voxel_map import MapConfig, VoxelMap
-from planner.types import ObstaclePrediction, Planner, PlannerInput, Trajectory
+from planner.types import ObstaclePrediction, Planner, PlannerInput
 from sim import World, load_scenario
 from sim.static_grid import static_occupancy
 
@@ -122,9 +122,9 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
     perc = make_perception(perception, settings=settings) if isinstance(perception, str) else perception
     spec = DEFAULT_PLANNER if planner is None else planner
     duration = sc.duration if cfg.duration is None else cfg.duration
-    labels = {"perception": perception if isinstance(perception, str) and is_spec(perception)
-              else getattr(perc, "name", type(perc).__name__),
-              "perception_name": getattr(perc, "name", type(perc).__name__)}
+    name = getattr(perc, "name", type(perc).__name__)
+    labels = {"perception": perception if isinstance(perception, str) and is_spec(perception) else name,
+              "perception_name": name}
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)

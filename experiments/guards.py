@@ -110,16 +110,12 @@ def planner_telemetry(planner) -> dict:
     if not isinstance(raw, dict):
         return {}
     out = {}
-    path = raw.get("path")
-    if path is not None:
-        p = np.asarray(path, dtype=float) if _numeric(path) else None
-        if p is not None and p.ndim == 2 and p.shape[1] in (2, 3) and np.all(np.isfinite(p)):
-            out["path"] = p
-    th = raw.get("threats")
-    if th is not None and _numeric(th):
-        th = np.asarray(th, dtype=float)
-        if th.ndim == 2 and th.shape[1] == 3:
-            out["threats"] = th[np.all(np.isfinite(th), axis=1)]
+    p = _floats(raw.get("path"))
+    if p is not None and p.ndim == 2 and p.shape[1] in (2, 3) and np.all(np.isfinite(p)):
+        out["path"] = p
+    th = _floats(raw.get("threats"))
+    if th is not None and th.ndim == 2 and th.shape[1] == 3:
+        out["threats"] = th[np.all(np.isfinite(th), axis=1)]
     gone = []
     for g in raw.get("forgotten") or ():
         try:
@@ -136,12 +132,14 @@ def planner_telemetry(planner) -> dict:
     return out
 
 
-def _numeric(a) -> bool:
+def _floats(a) -> np.ndarray | None:
+    """``a`` as a float array; None when it is None or not numbers."""
+    if a is None:
+        return None
     try:
-        np.asarray(a, dtype=float)
-        return True
+        return np.asarray(a, dtype=float)
     except (TypeError, ValueError):
-        return False
+        return None
 
 
 def _guarded(call, errors: ModuleErrors, stamp: float):

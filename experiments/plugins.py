@@ -92,7 +92,7 @@ def load_plugin(spec: str, methods: tuple[str, ...], protocol: str, where: str, 
     ``config_class`` (``config`` None: its defaults) and as ``Class()`` otherwise; PluginError when it
     cannot be built or lacks one of ``methods``."""
     cls = load_class(spec)
-    own = config_class(spec)
+    own = type(config) if config is not None else config_class(spec)
     if own is not None and config is None:
         config = own()
     try:

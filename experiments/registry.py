@@ -14,12 +14,12 @@ planners, built-in or plug-in.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 from dodt.presets import PRESETS, preset
 from experiments import config_limits
-from experiments.config import ConfigError, Settings, build
+from dodt.config import DODTConfig
+from experiments.config import Settings, build
 from experiments.episode_config import EpisodeConfig
 from experiments.perception_modes import (MODES, NOISY_ORACLE_VELOCITY_NOISE, DODTPerception, MovingTrackRule,
                                           OracleConfig, OraclePerception, StaticOnlyPerception)
@@ -58,16 +58,6 @@ def _check(key: str, value) -> None:
         config_limits.check_value(key, value)
 
 
-@dataclass(frozen=True)
-class Components:
-    """What a command's options name: the perception and planner specs, and their overrides."""
-
-    perception: str = "dodt"
-    planner: str = DEFAULT_PLANNER
-    shield: bool = False  # put a plug-in planner behind the passive-safety shield
-    settings: Settings = Settings()
-
-
 def sections_for(perception: str = "dodt", planner: str = DEFAULT_PLANNER) -> dict[str, Any]:
     """The sections a run with these components accepts: the built-in ones, and ``planner`` /
     ``perception`` for a plug-in that declares a configuration class."""
@@ -97,16 +87,22 @@ def plugin_sections(perception, planner, settings: Settings) -> dict:
     none) that declare one, by section, as they are built with ``settings``."""
     out = {}
     for name, spec in (("planner", planner), ("perception", perception)):
-        if isinstance(spec, str) and is_spec(spec):
-            cls = config_class(spec)
-            if cls is not None:
-                out[name] = configured(settings, name, cls())
+        cfg = _plugin_config(spec, name, settings)
+        if cfg is not None:
+            out[name] = cfg
     return out
 
 
 def configured(settings: Settings, section: str, default):
     """``default`` with ``settings``' overrides of ``section`` applied and checked."""
     return settings.apply(section, default, _check)
+
+
+def _plugin_config(spec, section: str, settings: Settings):
+    """The configuration a plug-in spec declares (``config_class``), with ``section``'s overrides; None for
+    a built-in name, an object, or a plug-in that declares none."""
+    cls = config_class(spec) if isinstance(spec, str) and is_spec(spec) else None
+    return None if cls is None else configured(settings, section, cls())
 
 
 # --------------------------------------------------------------------------- perception
@@ -125,9 +121,8 @@ def make_perception(spec: str, settings: Settings = Settings(), learned_detector
     own configuration: ``dodt`` and ``moving_rule`` for the DODT modes, ``oracle`` for the oracle modes,
     ``perception`` for a plug-in with a configuration class; static-only reads none."""
     if is_spec(spec):
-        cls = config_class(spec)
-        cfg = None if cls is None else configured(settings, "perception", cls())
-        return load_plugin(spec, PERCEPTION_METHODS, "perception", "dodt.protocol.PerceptionModule", cfg)
+        return load_plugin(spec, PERCEPTION_METHODS, "perception", "dodt.protocol.PerceptionModule",
+                           _plugin_config(spec, "perception", settings))
     if spec in ("oracle", "oracle-360", "oracle-noisy"):
         own = OracleConfig(velocity_noise=NOISY_ORACLE_VELOCITY_NOISE) if spec == "oracle-noisy" else OracleConfig()
         return OraclePerception(configured(settings, "oracle", own), all_around=spec == "oracle-360", name=spec)
@@ -144,9 +139,8 @@ def perception_sections(perception) -> dict:
     """The configuration a perception module runs with, by section: ``dodt`` for a module holding a DODT,
     ``moving_rule`` for the DODT modes, ``oracle`` for the oracle modes (a plug-in's own: plugin_sections)."""
     out = {}
-    dodt = getattr(perception, "dodt", None)
-    cfg = getattr(dodt, "cfg", None)
-    if cfg is not None and type(cfg).__name__ == "DODTConfig":
+    cfg = getattr(getattr(perception, "dodt", None), "cfg", None)
+    if isinstance(cfg, DODTConfig):
         out["dodt"] = cfg
     if isinstance(perception, DODTPerception):
         out["moving_rule"] = perception.moving_rule
@@ -181,9 +175,8 @@ def make_planner(spec: str, robot_radius: float, settings: Settings = Settings()
     if spec == DEFAULT_PLANNER:
         nav = configured(settings, "navigator", NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius)))
         return behind_shield(MPCPlanner(nav), robot_radius, settings)
-    cls = config_class(spec)
-    cfg = None if cls is None else configured(settings, "planner", cls())
-    plugin = load_plugin(spec, PLANNER_METHODS, "planner", "planner.types.Planner", cfg)
+    plugin = load_plugin(spec, PLANNER_METHODS, "planner", "planner.types.Planner",
+                         _plugin_config(spec, "planner", settings))
     return behind_shield(plugin, robot_radius, settings) if shield else plugin
 
 

@@ -7,7 +7,7 @@ import typing
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from dodt.presets import PRESETS, preset
+from dodt.presets import PRESETS
 from experiments.config import parse_value
 from experiments.registry import builtin_sections
 from experiments.config_limits import LIMITS, Limit, check_config, check_value
