@@ -75,6 +75,8 @@ class Capture:
     T_body: np.ndarray  # the drone's true pose
     state: DroneState
     obstacles: tuple[ObstacleTruth, ...]
+    # the rig's other cameras (sim.extra_cameras): (depth mm, T_camera_other: that camera in the first's frame)
+    extra: tuple = ()
 
 
 class FrameQueue:
@@ -86,6 +88,7 @@ class FrameQueue:
         self.pending: list[Capture] = []
         self.frame: SensorFrame | None = None  # the latest delivered
         self.truth: GroundTruth | None = None  # ... and the truth of its capture
+        self.extra: tuple[SensorFrame, ...] = ()  # ... and the rig's other cameras' frames of its capture
 
     def add(self, capture: Capture, fetch: Callable[[int], tuple] | None = None) -> SensorFrame | None:
         """Queue a capture; deliver (and return the last of) those now due. ``fetch(seq)`` gives the images of
@@ -103,5 +106,8 @@ class FrameQueue:
             self.truth = GroundTruth(stamp=c.stamp, seq=c.seq, obstacles=c.obstacles, T_world_camera=c.T_true,
                                      drone_position=c.state.position, drone_velocity=c.state.velocity,
                                      segmentation=seg, T_world_body=c.T_body)
+            self.extra = tuple(SensorFrame(depth=d, color=None, intrinsics=self.intrinsics,
+                                           T_world_camera=c.T_odom @ T_rel, stamp=c.stamp, seq=c.seq)
+                               for d, T_rel in c.extra)
             delivered = self.frame
         return delivered

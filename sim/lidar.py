@@ -251,14 +251,42 @@ def simulate_scan(client, T_world_sensor: np.ndarray, model: LidarModel, rng: np
         true_range, normal = cast_rays(clients, T[:3, 3].copy(), d_world, model.max_range)
     else:
         true_range, normal = caster(T, d_sensor, model.max_range)
-    cos_incidence = np.minimum(np.abs(np.einsum("ij,ij->i", d_world, normal)), 1.0)
-    dropped = draw < dropout_probability(model, np.arccos(cos_incidence))
-    measured = true_range + noise
-    keep = (np.isfinite(true_range) & ~dropped & (true_range >= model.min_range) & (true_range <= model.max_range)
-            & (measured >= model.min_range) & (measured <= model.max_range))
-    r = measured[keep]
+    points, ranges, az, el = _returns(true_range, normal, d_world, d_sensor, azimuth, elevation, noise, draw,
+                                      float(model.min_range), float(model.max_range), float(model.grazing_start),
+                                      float(model.grazing_full))
     reported = T if T_world_sensor_reported is None else np.asarray(T_world_sensor_reported, dtype=np.float64)
-    return LidarScan(points=(d_sensor[keep] * r[:, None]).astype(np.float32), ranges=r.astype(np.float32),
-                     azimuth=azimuth[keep].astype(np.float32), elevation=elevation[keep].astype(np.float32),
-                     stamp=float(stamp), T_world_sensor=reported.copy(),
-                     seq=int(scan_index if seq is None else seq), n_rays=n)
+    return LidarScan(points=points, ranges=ranges, azimuth=az, elevation=el, stamp=float(stamp),
+                     T_world_sensor=reported.copy(), seq=int(scan_index if seq is None else seq), n_rays=n)
+
+
+@njit(cache=True, nogil=True)
+def _returns(true_range, normal, d_world, d_sensor, azimuth, elevation, noise, draw, r_min, r_max, g_start, g_full):
+    """The rays that return (a hit within the limits, not dropped at grazing incidence: dropout_probability's
+    rule) and their float32 (points, ranges, azimuth, elevation), in ray order."""
+    n = true_range.shape[0]
+    keep = np.zeros(n, np.bool_)
+    count = 0
+    for i in range(n):
+        t = true_range[i]
+        if not (t >= r_min and t <= r_max):  # also false for inf and NaN
+            continue
+        c = abs(d_world[i, 0] * normal[i, 0] + d_world[i, 1] * normal[i, 1] + d_world[i, 2] * normal[i, 2])
+        p_drop = min(max((math.acos(min(c, 1.0)) - g_start) / (g_full - g_start), 0.0), 1.0)
+        m = t + noise[i]
+        if draw[i] < p_drop or not (m >= r_min and m <= r_max):
+            continue
+        keep[i] = True
+        count += 1
+    points = np.empty((count, 3), np.float32)
+    ranges = np.empty(count, np.float32)
+    az = np.empty(count, np.float32)
+    el = np.empty(count, np.float32)
+    j = 0
+    for i in range(n):
+        if keep[i]:
+            m = true_range[i] + noise[i]
+            for a in range(3):
+                points[j, a] = d_sensor[i, a] * m
+            ranges[j], az[j], el[j] = m, azimuth[i], elevation[i]
+            j += 1
+    return points, ranges, az, el

@@ -44,6 +44,7 @@ from sim.frame_capture import Capture, FrameQueue, ImageFinisher
 from sim.ground_truth import GroundTruth, ObstacleTruth
 from sim.lidar import LidarModel, simulate_scan, top_mount
 from sim.lidar_panorama import PanoramaCaster
+from sim.extra_cameras import ExtraCameras
 from sim.odometry import OdometryNoise
 from sim.render_backend import RenderBackend
 from sim.rotors import Rotors
@@ -121,6 +122,7 @@ class World:
         self.steps_per_frame = r.physics // r.camera
         self._client = self._query_client = None
         self._lidar_panorama = None  # (model, sim.lidar_panorama.PanoramaCaster) once a panorama scan was asked for
+        self._extra_cameras = None  # sim.extra_cameras.ExtraCameras once add_cameras was called
         try:
             self.reset()
         except BaseException:  # a world that fails to build closes what it started (the render process)
@@ -193,6 +195,9 @@ class World:
         if getattr(self, "_lidar_panorama", None) is not None:
             self._lidar_panorama[1].release()
             self._lidar_panorama = None
+        if getattr(self, "_extra_cameras", None) is not None:
+            self._extra_cameras.release()
+            self._extra_cameras = None
         for cid in (self._client, self._query_client):
             if cid is not None:
                 try:
@@ -394,9 +399,34 @@ class World:
             images = self._finish_images(*self._render_buffers(T_true))
         else:  # render=False: the camera's clock and pose only
             images = (self._no_returns, None, None)
+        extra = ()
+        if self._extra_cameras is not None:
+            ec = self._extra_cameras
+            T_rel = [np.linalg.inv(self.T_body_camera) @ T for T in ec.T_body_cameras]
+            extra = tuple(zip(ec.render(T_body), T_rel))
         capture = Capture(seq, self.time, images, self._odometry(T_true), T_true, T_body, self.state(),
-                          self.obstacle_truth())
+                          self.obstacle_truth(), extra)
         return self._frames.add(capture, None if rp is None else rp.result)
+
+    # ------------------------------------------------------------------ more cameras
+
+    def add_cameras(self, yaws) -> None:
+        """Give the drone more cameras like the first, turned about the body's z axis by ``yaws`` [deg]
+        (sim.extra_cameras: depth only, drawn in this process with the gl renderer; GLUnavailable without
+        OpenGL). From the next capture on, each frame delivered has theirs in ``latest_extra_frames``, taken
+        at its instant. The first camera's frames, and everything else, are as without them."""
+        if self._extra_cameras is not None:
+            self._extra_cameras.release()
+            self._extra_cameras = None
+        if len(yaws):
+            sc = self.scenario
+            self._extra_cameras = ExtraCameras(p, self._client, self.intrinsics, sc.camera,
+                                               DepthNoiseModel(sc.noise, sc.camera.fx), self.seed, yaws,
+                                               self.T_body_camera)
+
+    def latest_extra_frames(self) -> tuple[SensorFrame, ...]:
+        """The other cameras' frames (``add_cameras``) of the capture ``latest_frame`` comes from."""
+        return self._frames.extra
 
     # ------------------------------------------------------------------ lidar
 

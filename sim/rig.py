@@ -1,0 +1,79 @@
+"""Sensor rigs: which sensors a drone carries and where (``--rig``, episode.rig).
+
+A rig is a tuple of ``SensorMount``s: cameras (the scenario's RGB-D camera model, each turned about the
+body's z axis by its ``yaw``) and LiDARs (sim.lidar's Mid-360-like model on top of the body). The named
+rigs:
+
+- ``front``: the paper's one forward D435-class camera (the default);
+- ``front_back``: that camera and one looking back;
+- ``surround4``: four cameras 90 deg apart (87 deg each: the horizon with small overlaps);
+- ``lidar``: a Mid-360-like LiDAR on top of the body and the forward camera.
+
+Every camera renders at the scenario's camera rate, a LiDAR scans at its model's rate (10 Hz).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.lidar import LidarModel, top_mount
+
+
+@dataclass(frozen=True)
+class SensorMount:
+    """One sensor of a rig: ``kind`` "camera" or "lidar", its name, and its yaw on the body [deg]
+    (cameras: the optical axis' heading from the body's x axis; a LiDAR: its x axis')."""
+
+    kind: str
+    name: str
+    yaw: float = 0.0
+
+    def __post_init__(self):
+        if self.kind not in ("camera", "lidar"):
+            raise ValueError(f"sensor {self.name!r}: kind must be 'camera' or 'lidar', got {self.kind!r}")
+        if not (isinstance(self.yaw, (int, float)) and math.isfinite(self.yaw) and -360.0 <= self.yaw <= 360.0):
+            raise ValueError(f"sensor {self.name!r}: yaw must be a finite angle in [-360, 360] deg, got {self.yaw!r}")
+
+    def lidar_model(self) -> LidarModel:
+        return LidarModel()
+
+    def T_body_lidar(self) -> np.ndarray:
+        """The LiDAR's frame in the body frame: on top, turned by ``yaw``."""
+        T = top_mount()
+        T[:3, :3] = yaw_matrix(self.yaw)
+        return T
+
+
+def yaw_matrix(yaw_deg: float) -> np.ndarray:
+    """The rotation about z by ``yaw_deg`` degrees."""
+    a = math.radians(yaw_deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+RIGS: dict[str, tuple[SensorMount, ...]] = {
+    "front": (SensorMount("camera", "front"),),
+    "front_back": (SensorMount("camera", "front"), SensorMount("camera", "back", 180.0)),
+    "surround4": (SensorMount("camera", "front"), SensorMount("camera", "left", 90.0),
+                  SensorMount("camera", "back", 180.0), SensorMount("camera", "right", -90.0)),
+    "lidar": (SensorMount("camera", "front"), SensorMount("lidar", "top")),
+}
+RIG_NAMES = tuple(RIGS)
+
+
+def rig(name: str) -> tuple[SensorMount, ...]:
+    """The named rig's sensors (ValueError naming the rigs for an unknown name)."""
+    try:
+        return RIGS[name]
+    except KeyError:
+        raise ValueError(f"unknown rig {name!r}; the rigs are {', '.join(RIG_NAMES)}") from None
+
+
+def cameras(sensors) -> tuple[SensorMount, ...]:
+    return tuple(s for s in sensors if s.kind == "camera")
+
+
+def lidars(sensors) -> tuple[SensorMount, ...]:
+    return tuple(s for s in sensors if s.kind == "lidar")

@@ -1,0 +1,67 @@
+"""Sensor rigs (sim.rig) and the cameras beyond the first (sim.extra_cameras)."""
+import numpy as np
+import pytest
+
+from experiments.config_limits import RIG_NAMES
+from sim import World, load_scenario
+from sim.rig import RIGS, SensorMount, cameras, lidars, rig
+
+
+def test_the_named_rigs_are_those_the_configuration_accepts():
+    assert tuple(RIGS) == RIG_NAMES
+    assert [m.yaw for m in cameras(rig("surround4"))] == [0.0, 90.0, 180.0, -90.0]
+    assert len(lidars(rig("lidar"))) == 1 and len(cameras(rig("lidar"))) == 1
+    assert cameras(rig("front"))[0].yaw == 0.0
+
+
+def test_bad_rigs_and_mounts_are_named():
+    with pytest.raises(ValueError, match="unknown rig 'sides'.*front, front_back"):
+        rig("sides")
+    with pytest.raises(ValueError, match="kind must be"):
+        SensorMount("radar", "r")
+    with pytest.raises(ValueError, match="yaw must be"):
+        SensorMount("camera", "c", float("nan"))
+
+
+def frames(world, n):
+    out = []
+    for _ in range(n):
+        f = world.step()
+        if f is not None:
+            out.append((f, world.latest_extra_frames()))
+    return out
+
+
+@pytest.fixture(scope="module")
+def two_worlds():
+    sc = load_scenario("crossing")
+    plain = World(sc, seed=3, render_process=False, renderer="gl")
+    rigged = World(sc, seed=3, render_process=False, renderer="gl")
+    rigged.add_cameras([180.0, 90.0])
+    yield frames(plain, 24), frames(rigged, 24)
+    plain.close()
+    rigged.close()
+
+
+def test_other_cameras_change_nothing_of_the_first_cameras_frames(two_worlds):
+    plain, rigged = two_worlds
+    assert len(plain) == len(rigged) > 3
+    for (a, extra_a), (b, _) in zip(plain, rigged):
+        assert extra_a == ()
+        assert np.array_equal(a.depth, b.depth) and np.array_equal(a.T_world_camera, b.T_world_camera)
+
+
+def test_each_other_camera_looks_its_way_from_the_same_instant(two_worlds):
+    _, rigged = two_worlds
+    first, extra = rigged[-1]
+    assert len(extra) == 2
+    back, left = extra
+    for f in extra:
+        assert f.stamp == first.stamp and f.seq == first.seq and f.color is None
+        assert f.depth.dtype == np.uint16 and f.depth.shape == first.depth.shape
+        assert np.count_nonzero(f.depth) > 0.2 * f.depth.size  # it sees the corridor
+    # optical axes: back is the first's reversed, left the first's turned +90 deg about z
+    z0, zb, zl = first.T_world_camera[:3, 2], back.T_world_camera[:3, 2], left.T_world_camera[:3, 2]
+    assert np.allclose(zb, -z0, atol=1e-9)
+    assert np.allclose(zl, [-z0[1], z0[0], z0[2]], atol=1e-9)
+    assert not np.array_equal(back.depth, first.depth)
