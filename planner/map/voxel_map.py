@@ -390,6 +390,12 @@ class VoxelMap:
 
         ``T_world_camera`` maps optical-frame points into the world; ``dynamic_boxes`` are (center, size)
         world AABBs. ``stamp`` is carried for the caller's logs only. Returns counters."""
+        return self.update_views([(depth_m, intrinsics, T_world_camera)], dynamic_boxes, stamp)
+
+    def update_views(self, views, dynamic_boxes=(), stamp=None) -> dict:
+        """``update`` with several depth images of one instant (a rig's sensors: [(depth_m, intrinsics,
+        T_world_camera)]): one update of the map (its dynamic regions and the counts of updates its rules
+        use), each image ray-cast in turn. Returns the counters summed over the images."""
         t0 = time.perf_counter()
         self._updates += 1
         self.version += 1
@@ -415,11 +421,22 @@ class VoxelMap:
         protected = self._protection
         protected[box] = self._established(box)
         self.log_odds[box][cover & ~protected[box]] = np.float32(self.l_min)
+        out = dict(rays=0, hits=0, skipped_in_dynamic=0, bad_pixels=0, stamp=stamp)
+        for depth_m, intrinsics, T_world_camera in views:
+            for k, v in self._cast_view(depth_m, intrinsics, T_world_camera, hist, protected).items():
+                out[k] += v
+        protected[box] = False
+        out["ms"] = (time.perf_counter() - t0) * 1e3
+        self.version += 1  # (also bumped on entry: nothing cached while the update ran is kept)
+        return out
+
+    def _cast_view(self, depth_m, intrinsics, T_world_camera, hist, protected) -> dict:
+        """Ray-cast one depth image into the map (``update_views``); its counters."""
         T = np.asarray(T_world_camera, dtype=np.float64)
         cam = np.ascontiguousarray(T[:3, 3])
         with np.errstate(invalid="ignore"):
             cam_v = np.floor((cam - self.origin) / self.res)
-        out = dict(rays=0, hits=0, skipped_in_dynamic=0, bad_pixels=0, stamp=stamp)
+        out = dict(rays=0, hits=0, skipped_in_dynamic=0, bad_pixels=0)
         if np.all(np.isfinite(T)) and np.all((cam_v >= 0) & (cam_v < self.dims)):
             rng = np.asarray(self.cfg.local_update_range)
             blo = np.maximum(np.floor((cam - rng - self.origin) / self.res), 0).astype(np.int64)
@@ -446,9 +463,6 @@ class VoxelMap:
             d = np.asarray(depth_m, np.float32)
             d = d[m:d.shape[0] - m:sk, m:d.shape[1] - m:sk]
             out["bad_pixels"] = int(np.count_nonzero(~(np.isfinite(d) & (d >= 0))))
-        protected[box] = False
-        out["ms"] = (time.perf_counter() - t0) * 1e3
-        self.version += 1  # (also bumped on entry: nothing cached while the update ran is kept)
         return out
 
     def _regions_box_of(self, regions: np.ndarray) -> np.ndarray:

@@ -412,3 +412,20 @@ def test_column_bands_and_occupied_centres_equal_the_direct_computations(height)
         want = np.zeros((0, 3)) if np.any(b <= a) else \
             m.origin + (np.argwhere(m.log_odds[a[0]:b[0], a[1]:b[1], a[2]:b[2]] >= m.l_occ) + a + 0.5) * m.res
         np.testing.assert_array_equal(m.occupied_centers(lo, hi), want)
+
+
+def test_several_views_are_one_update_each_view_cast_in_turn():
+    back = camera_pose(yaw=np.pi)
+    behind = (np.array([-1.83, -3.97, 0.0]), np.array([-1.53, 3.97, 2.6]))  # off the grid, as WALL
+    d_front, d_back = render_depth(K, T, [WALL]), render_depth(K, back, [behind])
+    one, views = VoxelMap(SMALL), VoxelMap(SMALL)
+    for _ in range(3):
+        a = one.update(d_front, K, T)
+        b = views.update_views([(d_front, K, T)])
+    assert np.array_equal(one.log_odds, views.log_odds) and a.keys() == b.keys()
+    for _ in range(6):
+        out = views.update_views([(d_front, K, T), (d_back, K, back)])
+    assert views._updates == 9  # one update for both views
+    assert out["hits"] > a["hits"]
+    assert views.is_occupied(np.array([[3.1, 0.05, 1.0], [-1.58, 0.05, 1.0]])).all()
+    assert views.is_free(np.array([[-1.0, 0.05, 1.0], [2.0, 0.05, 1.0]])).all()
