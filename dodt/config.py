@@ -349,6 +349,20 @@ class LearnedConfig:
 
 
 @dataclass(frozen=True)
+class LidarDetectorConfig:
+    """The LiDAR detector of a rig with a LiDAR (dodt.lidar_detector; ours, after LV-DOT)."""
+    max_range: float = 6.0  # m horizontally: farther returns are too sparse to cluster
+    min_range: float = 0.35  # m from the sensor: nearer returns are the vehicle's own frame
+    wall_margin: float = 0.15  # m inside the geofence's y sides: the corridor's walls
+    voxel: float = 0.1  # m, the voxel filter's cell
+    eps: float = 0.35  # m, DBSCAN's radius on the filtered points
+    min_points: int = 4  # DBSCAN's core points' neighbours (the point included)
+    max_footprint: float = 2.0  # m: a wider cluster is structure
+    structure_fraction: float = 0.5  # of a box on established static voxels: structure
+    floor_tolerance: float = 0.15  # m above the lowest ray's reach: the box reaches the floor
+
+
+@dataclass(frozen=True)
 class DODTConfig:
     name: str = "dodt"
     depth: DepthConfig = field(default_factory=DepthConfig)
@@ -361,6 +375,7 @@ class DODTConfig:
     track: TrackConfig = field(default_factory=TrackConfig)
     identification: IdentificationConfig = field(default_factory=IdentificationConfig)
     learned: LearnedConfig = field(default_factory=LearnedConfig)
+    lidar: LidarDetectorConfig = field(default_factory=LidarDetectorConfig)
     # Hz: the frame rate the per-frame constants (KalmanConfig's Q, TrackConfig.size_smoothing) are
     # given for, the reference code's 30 Hz timers; at another rate they are scaled by dt x this
     reference_rate: float = 30.0

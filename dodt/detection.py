@@ -17,6 +17,7 @@ class Detection:
     is_person: bool = False  # set by a learned detector that recognises people
     cut: bool = False  # its box crosses the image's left or right edge (set by the pipeline)
     sides: "ViewSides | None" = None  # its sides and the image edges that cut it (dodt.view_edge; the pipeline)
+    sensor: str = ""  # the rig's sensor that found it ("": the first camera, whose frames DODT.process takes)
 
     @property
     def lower(self) -> np.ndarray:

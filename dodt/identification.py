@@ -86,7 +86,8 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     or of the part of it within ``match_reach`` of the points (the matches are the same).
     Matching against the whole cloud, not only the track's own points back then, keeps a
     static obstacle static when its box grows (more of it seen, or split from a neighbour):
-    its points find their unmoved twins wherever they were.
+    its points find their unmoved twins wherever they were. ``K`` None: the cloud is an all-round
+    LiDAR's (dodt.lidar_detector), in whose view every point was.
     """
     n = len(points_now)
     tree = cloud_then if isinstance(cloud_then, cKDTree) else None
@@ -98,8 +99,13 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
             data = None
     if n == 0 or data is None or dt <= 0:
         return 0, 0, n
-    # In view back then, and not at the edge of the depth range, where the filtered cloud thins out.
-    seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth - cfg.range_margin, margin_px=cfg.fov_margin_px)
+    # In view back then, and not at the edge of the depth range, where the filtered cloud thins out (K None:
+    # an all-round sensor's cloud, cropped to its range by its detector: every point was in view).
+    if K is None:
+        seen = np.ones(n, bool)
+    else:
+        seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth - cfg.range_margin,
+                                margin_px=cfg.fov_margin_px)
     # A nearest neighbour farther than anything walks in dt is no correspondence: that surface
     # was not in the cloud back then (occluded, too sparse, out of range). The search stops at
     # that bound (much faster); beyond it the tree answers distance inf and index M.

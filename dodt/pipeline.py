@@ -14,6 +14,10 @@ is a stamp that jumps ahead by more than ``depth.max_time_jump``, until
 tracks; a gap longer than the coasting time restarts the tracks).
 Every history window is a span of time (dodt.config), so any frame rate works with one
 configuration.
+With a LiDAR (a rig's): a scan handed to ``observe_lidar`` joins the next frame's detections
+(dodt.lidar_detector's boxes of what the camera's detectors did not find, LV-DOT's LiDAR-visual
+ensemble), so that obstacles beside and behind the camera are measured by the same tracker; tracks a
+LiDAR box updated are identified by their filtered speed (no depth image of them to vote with).
 The learned person detector (YOLO-MAD, dodt.learned) runs when ``cfg.learned.enabled``; any
 callable (frame, depth_m, ensemble_detections) -> detections can stand in for it through
 ``learned_detector``. Its time is the "learned" module's.
@@ -32,13 +36,15 @@ from dodt.detection import Detection
 from dodt.ensemble import ensemble
 from dodt.frames import SensorFrame
 from dodt.geometry import box_cut_by_view_side, complete_hidden_depth, points_in_box
+from dodt.lidar_detector import LidarDetector
 from dodt.pointcloud import VoxelCloud
 from dodt.result import PerceptionResult
 from dodt.tracker import Tracker
 from dodt.udepth import UDepthDetector
 from dodt.view_edge import view_sides
 
-MODULES = ("point_cloud", "udepth", "dbscan", "ensemble", "learned", "association", "kalman", "identification")
+MODULES = ("point_cloud", "udepth", "dbscan", "ensemble", "learned", "other_cameras", "lidar", "association",
+           "kalman", "identification")
 
 
 _LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
@@ -90,6 +96,11 @@ def validate_frame(frame: SensorFrame) -> None:
                              "(a left-handed camera or world frame?)")
 
 
+def _footprints_meet(a: Detection, b: Detection, grow: float) -> bool:
+    """Whether two detections' horizontal footprints overlap (each grown by ``grow`` / 2 m)."""
+    return bool(np.all(np.abs(a.center[:2] - b.center[:2]) <= (a.size[:2] + b.size[:2]) / 2 + grow))
+
+
 def mark_cut(dets: list[Detection], K, T_world_camera: np.ndarray) -> None:
     """Set each detection's ``cut``: its box crosses the image's left or right edge."""
     for d in dets:
@@ -108,6 +119,13 @@ class DODT:
             learned_detector = YoloMAD(self.cfg.learned)
         self.learned_detector = learned_detector
         self.tracker = Tracker(self.cfg)
+        self.lidar = LidarDetector(self.cfg.lidar, self.cfg.voxel.ground_height, self.cfg.voxel.ceiling_height)
+        self._scan = None  # the latest LiDAR scan not yet fused (observe_lidar)
+        self._others: tuple = ()  # the rig's other cameras' frames for the next frame (observe_cameras)
+        self.lidar_clouds: deque[tuple[float, np.ndarray]] = deque()  # (frame stamp, LiDAR cloud) to vote with
+        # the rig's other cameras' poses and clouds by frame seq, to vote with: {sensor: (poses, clouds, K)}
+        self.other_views: dict[str, tuple[dict, dict, object]] = {}
+        self._lidar_view = (None, None, None)  # (static map, geofence, lowest ray's elevation): set_scene
         self.last_stamp: float | None = None
         self.poses: dict[int, np.ndarray] = {}
         self.clouds: dict[int, np.ndarray] = {}  # seq -> that frame's filtered cloud
@@ -119,6 +137,10 @@ class DODT:
 
     def reset(self) -> None:
         self.tracker.reset()
+        self._scan = None
+        self._others = ()
+        self.lidar_clouds.clear()
+        self.other_views.clear()
         self.last_stamp = None
         self.poses.clear()
         self.clouds.clear()
@@ -146,6 +168,89 @@ class DODT:
         self.reset()
         self.counters["restarted_after_gap"] += 1
         return True
+
+    def set_scene(self, static_map=None, geofence=None, lidar_elevation_min: float | None = None) -> None:
+        """What the LiDAR detector knows of the scene (dodt.lidar_detector): the static map
+        (a dodt.context.StaticMapView), the geofence ((x, y) low, (x, y) high; its y sides are walls),
+        the LiDAR's lowest ray's elevation [rad]."""
+        self._lidar_view = (static_map, geofence, lidar_elevation_min)
+
+    def observe_lidar(self, scan) -> None:
+        """Keep a LiDAR scan (dodt.frames.LidarScan) for the next frame: its boxes join that frame's
+        detections."""
+        self._scan = scan
+
+    def observe_cameras(self, frames) -> None:
+        """Keep the rig's other cameras' frames (dodt.frames.SensorFrame, depth only) of the next frame's
+        instant: their depth detectors' boxes join that frame's detections, and tracks seen through in them
+        are dropped as in the first camera's."""
+        self._others = tuple(frames)
+
+    def _other_cameras(self, dets: list[Detection], seq: int) -> tuple[list[Detection], list]:
+        """(the other cameras' detections, each merged into one it overlaps; [(depth m, K, T)] of each)."""
+        frames, self._others = self._others, ()
+        views, out = [], []
+        for k, f in enumerate(frames):
+            validate_frame(f)
+            T = np.asarray(f.T_world_camera, dtype=np.float64)
+            if not np.all(np.isfinite(T)):
+                continue
+            depth_m, _ = f.depth_m_counted()
+            points = self.cloud(depth_m, f.intrinsics, T)
+            name = f"camera{k + 1}"
+            poses, clouds, _ = self.other_views.setdefault(name, ({}, {}, f.intrinsics))
+            poses[seq], clouds[seq] = T, points
+            for old in [q for q in poses if q not in self.poses and q != seq]:  # the first camera's window
+                poses.pop(old)
+                clouds.pop(old, None)
+            found = self._depth_detections(f, depth_m, T, points)
+            for d in found:
+                d.sensor = name
+                other = next((c for c in dets + out if _footprints_meet(d, c, 0.0)), None)
+                if other is None:
+                    out.append(d)
+                else:  # one obstacle across two cameras' views: one box around both parts
+                    lo, hi = np.minimum(other.lower, d.lower), np.maximum(other.upper, d.upper)
+                    other.center, other.size = (lo + hi) / 2, hi - lo
+                    other.points = np.concatenate([other.points, d.points]).astype(np.float32)
+            views.append((depth_m, f.intrinsics, T))
+        return out, views
+
+    def _lidar_detections(self, dets: list[Detection], stamp: float) -> list[Detection]:
+        """The kept scan's boxes whose footprints meet none of the camera's detections' (those are the
+        camera's to measure); its filtered cloud joins ``lidar_clouds`` at ``stamp``."""
+        scan, self._scan = self._scan, None
+        if scan is None or not np.all(np.isfinite(scan.T_world_sensor)):
+            return []
+        static_map, geofence, el_min = self._lidar_view
+        out = []
+        grow = self.cfg.lidar.voxel
+        found = self.lidar(scan, static_map, geofence, el_min)
+        self.lidar_clouds.append((stamp, self.lidar.last_cloud))
+        span = self.cfg.identification.vote_span + 0.25  # s: the voting's reach back, and a scan period or two
+        while self.lidar_clouds and self.lidar_clouds[0][0] < stamp - span:
+            self.lidar_clouds.popleft()
+        for d in found:
+            if not any(_footprints_meet(d, c, grow) for c in dets):
+                out.append(d)
+        return out
+
+    def _depth_detections(self, frame, depth_m, T, points) -> list[Detection]:
+        """The depth detectors' ensemble on another camera's frame (no learned detector: no colour)."""
+        cfg = self.cfg.ensemble
+        ud = self.udepth(depth_m, frame.intrinsics, T) if "udepth" in cfg.detectors else []
+        db = self.dbscan(points) if "dbscan" in cfg.detectors else []
+        if cfg.complete_depth > 0:
+            for d in ud + db:
+                d.center, d.size = complete_hidden_depth(d.center, d.size, T[:3, 3], cfg.complete_depth)
+        if len(cfg.detectors) == 2:
+            dets = ensemble(ud, db, cfg)
+        else:
+            dets = ud if cfg.detectors == ("udepth",) else db
+        for d in dets:
+            if len(d.points) == 0 and len(points):
+                d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
+        return dets
 
     # ------------------------------------------------------------------ helpers
 
@@ -229,6 +334,13 @@ class DODT:
         t_cloud = (time.perf_counter() - t0) * 1e3
         self.clouds[seq] = points
         dets, debug = self._detect(frame, depth_m, T, points)
+        t0 = time.perf_counter()
+        other_dets, other_views = self._other_cameras(dets, seq) if self._others else ([], [])
+        t_other = (time.perf_counter() - t0) * 1e3
+        t0 = time.perf_counter()
+        lidar_dets = self._lidar_detections(dets + other_dets, stamp)
+        dets = dets + other_dets + lidar_dets
+        t_lidar = (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()
         if dt > 0:
@@ -237,16 +349,21 @@ class DODT:
         t1 = time.perf_counter()
         self.tracker.correct(dets, pairs, seq, stamp, T[:3, 3])
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
+        for d_k, K_k, T_k in other_views:
+            self.tracker.drop_seen_through(d_k, K_k, T_k)
         boxes_2d = getattr(self.learned_detector, "last_boxes_2d", None)
         if boxes_2d is not None and frame.color is not None:
             self.tracker.drop_unseen_people(boxes_2d, depth_m, frame.intrinsics, T)
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
-            tr.identify(seq, self.poses, self.clouds.get, frame.intrinsics, self.cfg.depth.depth_max)
+            tr.identify(seq, self.poses, self.clouds.get, frame.intrinsics, self.cfg.depth.depth_max, self.lidar_clouds,
+                        {k: (v[0], v[1].get, v[2]) for k, v in self.other_views.items()})
         t3 = time.perf_counter()
-        timings = {"point_cloud": t_cloud, **debug["timings"], "association": (t1 - t0) * 1e3,
+        timings = {"point_cloud": t_cloud, **debug["timings"], "other_cameras": t_other, "lidar": t_lidar, "association": (t1 - t0) * 1e3,
                    "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3,
                    "total": (t3 - t_start) * 1e3}
-        boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]] for k in ("udepth", "dbscan", "learned", "ensemble")}
+        debug["lidar"], debug["other_cameras"] = lidar_dets, other_dets
+        boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]]
+                 for k in ("udepth", "dbscan", "learned", "ensemble", "other_cameras", "lidar")}
         return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),
                                 timings_ms=timings, detections=boxes, bad_pixels=n_bad)

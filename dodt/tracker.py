@@ -112,6 +112,9 @@ class Track:
         self.person_votes: deque[bool] = deque()
         self._vote_person(det)
         self.coasting = False
+        # the sensor of the latest detection ("": the first camera) and whether it was a LiDAR box
+        self.sensor = det.sensor
+        self.by_lidar = det.source == "lidar"
         self.missed = 0  # consecutive frames without a detection
         self.headings: deque[tuple[float, float]] = deque()  # (stamp, heading of the pseudo-measured velocity)
 
@@ -283,15 +286,24 @@ class Track:
         self.missed = 0
         self._vote_person(det)
         self.coasting = False
+        self.sensor = det.sensor
+        self.by_lidar = det.source == "lidar"
 
-    def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float) -> None:
-        """clouds(seq) -> that frame's whole filtered cloud, or None."""
+    def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float,
+                 lidar_clouds=(), other_cameras=None) -> None:
+        """clouds(seq) -> that frame's whole filtered cloud, or None. lidar_clouds: (stamp, filtered cloud)
+        of the recent LiDAR scans, oldest first (a track a LiDAR box updated votes against them).
+        other_cameras: {sensor: (poses, clouds, K)} of the rig's other cameras (a track another camera
+        measured votes in that camera's view)."""
         cfg = self.cfg.identification
         if self.coasting:
             self._label(self.geometric_dynamic)
             return  # no new points: the label stays
         speed = float(np.linalg.norm(self.kf.velocity))
         cur_seq, cur_t, cur_pts = self.clouds[-1]
+        if self.by_lidar:
+            self._identify_by_lidar(speed, cur_t, cur_pts, lidar_clouds)
+            return
         # the cloud from k frames back (vote_span), or the oldest one kept since then
         k_back = self.clock.intervals(cfg.vote_span)
         old = [c for c in self.clouds if cur_seq - k_back <= c[0] < cur_seq]
@@ -299,6 +311,8 @@ class Track:
         # voting only for what moves fast enough to be a candidate at all, and is not wider
         # than any walking person or pair of people (saves the work; neither can be a candidate)
         wide = 0 < cfg.max_vote_extent < float(np.hypot(self.det_size[0], self.det_size[1]))
+        if self.sensor and other_cameras and self.sensor in other_cameras:
+            poses, clouds, K = other_cameras[self.sensor]  # vote in the view of the camera that measured it
         if old and cfg.method != "velocity" and speed >= cfg.velocity_threshold and not wide:
             o_seq, o_t, o_pts = old[0]
             T_then = poses.get(o_seq)
@@ -316,15 +330,38 @@ class Track:
                 lo, hi = lo.astype(voters.dtype) - r, hi.astype(voters.dtype) + r
                 near = crop_to_box(cloud_then, lo, hi)
                 votes, valid, skipped = vote(voters, near, dt, v_box, T_then, K, max_depth, cfg)
-        cand = is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg)
-        self.candidates.append(cand)
-        keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
-                                       self.clock.intervals(cfg.release_span) + 1))
         # The geometric label (candidates, consistency, the hysteresis and the force-dynamic lock)
         # sees only the geometric evidence; the person label adds to it and does not feed it. Fed
         # into it, ten person frames locked a static obstacle dynamic for good (force_dynamic):
         # on circles a 3 m tall obstacle 5 m away, mutual best match of a passing person's box
         # for a while, stayed dynamic for 8 s after its last person box.
+        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))
+
+    def _identify_by_lidar(self, speed: float, now: float, points: np.ndarray, lidar_clouds) -> None:
+        """``identify`` for a track a LiDAR box updated: the same point voting against the LiDAR's cloud of
+        the newest scan at least ``vote_span`` old (its view is all round: every point was in it)."""
+        cfg = self.cfg.identification
+        then = [(t, c) for t, c in lidar_clouds if t <= now - cfg.vote_span + 1e-6]
+        votes, valid, skipped = 0, 0, len(points)
+        if then and speed >= cfg.velocity_threshold and len(points):
+            t_then, cloud = then[-1]
+            old = [c for c in self.clouds if c[1] <= t_then + 1e-6]
+            dt = now - t_then
+            if len(cloud) and dt > 0:
+                ref = old[-1][2] if old and len(old[-1][2]) else points
+                v_box = (mean_columns(points) - mean_columns(ref)) / dt
+                r = match_reach(dt, cfg)
+                lo, hi = column_bounds(points)
+                near = crop_to_box(cloud, lo.astype(cloud.dtype) - r, hi.astype(cloud.dtype) + r)
+                votes, valid, skipped = vote(points, near, dt, v_box, None, None, 0.0, cfg)
+        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))
+
+    def _decide(self, cand: bool) -> None:
+        """Add this frame's candidate test and label the track (dodt.identification.decide)."""
+        cfg = self.cfg.identification
+        self.candidates.append(cand)
+        keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
+                                       self.clock.intervals(cfg.release_span) + 1))
         self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg, self.clock)
         self._label(self.geometric_dynamic)
 
