@@ -167,6 +167,8 @@ ANY_STRING = Limit(kind="string")
 
 # the code's own lists (module docstring)
 RENDERER_CHOICES = ("auto", "gl", "pybullet", "tiny", "egl")  # sim.scenario.RENDERER_CHOICES
+# the named sensor rigs (sim.rig.RIGS; not imported here: it loads the simulator)
+RIG_NAMES = ("front", "front_back", "surround4", "lidar")
 STATIC_MAPS = ("depth", "truth")  # the static maps an episode can fly with (EpisodeConfig.static_map)
 LEARNED_LAYOUTS = ("auto", "dodt", "yolov8", "yolov5", "yolox")  # "auto" + dodt.learned.yolo.LAYOUTS
 LEARNED_VIEWS = ("full", "flip", "center", "center-flip")  # dodt.learned.views.VIEWS
@@ -199,6 +201,7 @@ LIMITS: dict[str, Limit] = {
     "episode.map_snapshot_period": _real(0.01, 3600.0),  # s
     "episode.duration": _real(0.0, 3600.0, lo_open=True, optional=True),  # s, as experiments.config.check
     "episode.static_map": _one_of(*STATIC_MAPS),
+    "episode.rig": _one_of(*RIG_NAMES),
     "episode.frame_latency": _whole(0, MAX_FRAME_LATENCY),  # camera periods, each frame held in memory
     "episode.render_process": BOOL,
     "episode.seen_band": _pair(0.0, 10.0),  # m, world z from the floor
@@ -373,6 +376,15 @@ LIMITS: dict[str, Limit] = {
     "dodt.udepth.extent_percentile": _real(0.0, 50.0, hi_open=True),  # the box spans p to 100 - p
     "dodt.udepth.min_height": _real(0.0, 10.0),  # m
     "dodt.udepth.height_filter": BOOL,
+    "dodt.lidar.max_range": _real(0.5, 100.0),  # m
+    "dodt.lidar.min_range": _real(0.0, 5.0),  # m
+    "dodt.lidar.wall_margin": _real(0.0, 2.0),  # m
+    "dodt.lidar.voxel": _real(0.02, 1.0),  # m
+    "dodt.lidar.eps": _real(0.0, 5.0, lo_open=True),  # m
+    "dodt.lidar.min_points": _whole(1, 10_000),
+    "dodt.lidar.max_footprint": _real(0.1, 100.0),  # m
+    "dodt.lidar.structure_fraction": _FRACTION,
+    "dodt.lidar.floor_tolerance": _real(0.0, 2.0),  # m
     "dodt.dbscan.eps": _real(0.0, 5.0, lo_open=True),  # m
     "dodt.dbscan.min_points": _whole(1, 10_000),
     "dodt.dbscan.min_size_xy": _real(0.0, 10.0),  # m

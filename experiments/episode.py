@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dodt.context import CameraSensor, EpisodeContext, Rates, VehicleLimits
+from dodt.context import CameraSensor, EpisodeContext, LidarSensor, Rates, VehicleLimits
+from dodt.lidar_views import scan_depth_views
 from experiments.compile_time import CompileTimer
 from experiments.config import Settings
 from experiments.environment import environment
@@ -42,11 +43,12 @@ from planner.map.visibility import SeenSpace
 from planner.map.voxel_map import MapConfig, VoxelMap
 from planner.types import ObstaclePrediction, Planner, PlannerInput
 from sim import World, load_scenario
+from sim.gl_renderer import GLUnavailable
+from sim.rig import SensorMount, cameras, lidars, rig, yaw_matrix
 from sim.static_grid import static_occupancy
 
 GOAL_TOLERANCE = 0.4  # m: the episode succeeds when the drone is this close to the goal
 CRASH_ALTITUDE = 0.1  # m: below this the drone is on the floor
-CAMERA_NAME = "front"  # the rig's one camera: the paper's forward RGB-D camera
 
 
 def map_config_for(scenario, robot_radius: float) -> MapConfig:
@@ -71,18 +73,33 @@ def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePredictio
     return tuple(out)
 
 
+def rig_sensors(sc, world: World, mounts: tuple[SensorMount, ...]) -> tuple:
+    """The context's sensors of a rig (sim.rig): each camera the scenario's camera model turned by its yaw,
+    each LiDAR sim.lidar's model on top."""
+    out = []
+    for m in mounts:
+        if m.kind == "camera":
+            T = world.T_body_camera.copy()
+            R = yaw_matrix(m.yaw)
+            T[:3, :3], T[:3, 3] = R @ T[:3, :3], R @ T[:3, 3]
+            out.append(CameraSensor(name=m.name, intrinsics=world.intrinsics, T_body_sensor=T,
+                                    rate=float(sc.rates.camera), max_depth=float(sc.camera.max_range)))
+        else:
+            model = m.lidar_model()
+            out.append(LidarSensor(name=m.name, model=model, T_body_sensor=m.T_body_lidar(), rate=model.scan_rate))
+    return tuple(out)
+
+
 def episode_context(sc, seed: int, world: World, cfg: EpisodeConfig, duration: float, vmap: VoxelMap,
                     seen: SeenSpace) -> EpisodeContext:
     """The context every module of this episode is reset with."""
     v = world.vehicle
     co = sc.corridor  # its walls are known: the planner keeps inside them (the map sees them only at a glance)
-    camera = CameraSensor(name=CAMERA_NAME, intrinsics=world.intrinsics, T_body_sensor=world.T_body_camera.copy(),
-                          rate=float(sc.rates.camera), max_depth=float(sc.camera.max_range))
     control = 1.0 / (world.dt * world.steps_per_control)
     return EpisodeContext(
         scenario=sc.name, seed=seed, duration=duration,
         vehicle=VehicleLimits.from_thrust(v.radius, v.collision_size, v.mass, v.thrust_to_weight),
-        sensors=(camera,), rates=Rates(control=control, plan=cfg.plan_rate, map=sc.rates.camera / cfg.map_every),
+        sensors=rig_sensors(sc, world, rig(cfg.rig)), rates=Rates(control=control, plan=cfg.plan_rate, map=sc.rates.camera / cfg.map_every),
         start=np.asarray(sc.drone.start, float), goal=np.asarray(sc.drone.goal, float),
         geofence=(np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2])),
         static_map=vmap, seen=seen)
@@ -138,6 +155,9 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
         world = World(sc, seed=seed, renderer=renderer if renderer is not None else cfg.renderer,
                       segmentation=False, render=render, frame_latency=cfg.frame_latency, color=color,
                       render_process=cfg.render_process and render and cfg.frame_latency > 0)
+        others = cameras(rig(cfg.rig))[1:]
+        if others and render:
+            world.add_cameras([m.yaw for m in others])
         if isinstance(spec, str):
             planner = make_planner(spec, world.vehicle.radius, settings, shield=shield)
             labels["planner"] = planner_label(spec, shield)
@@ -231,6 +251,7 @@ class _Loop:
         summary = summarize_log(self.log.finish())
         summary["map_voxels_occupied"] = int(self.vmap.occupied_count())
         summary["perception_name"] = self.labels["perception_name"]
+        summary["rig"] = self.cfg.rig
         summary["config"] = config
         return summary
 
@@ -249,14 +270,40 @@ class _Loop:
         self.perception.reset(ctx)
         self.planner.reset(ctx)
         self.truth_for_perception = bool(getattr(self.perception.perception, "uses_ground_truth", False))
+        self._setup_rig(ctx)
         self.rec = EpisodeRecorder(self.log, cfg.map_snapshot_period, map_changes_stop=self.known_map)
         return ctx
+
+    def _setup_rig(self, ctx: EpisodeContext) -> None:
+        """The rig's other cameras (their frames come with the first's) and its LiDAR: scanned every
+        ``lidar_every``-th camera frame when perception reads scans or the map is built from the sensors."""
+        world, perc = self.world, self.perception.perception
+        self.other_cameras = len(cameras(rig(self.cfg.rig))) > 1 and world.render_on
+        self.lidar = next((s for s in ctx.sensors if isinstance(s, LidarSensor)), None)
+        wants_scans = callable(getattr(perc, "observe_lidar", None)) or not self.known_map
+        if self.lidar is not None and not (wants_scans and world.render_on):
+            self.lidar = None  # nothing would read its scans
+        self.lidar_every = 1 if self.lidar is None else \
+            max(1, int(round(self.sc.rates.camera / self.lidar.rate)))
+        self.lidar_method = "panorama"
+        self.map_scan = None  # the latest scan not yet in the map
+
+    def _scan(self):
+        """A LiDAR scan now: the depth panorama (sim.lidar_panorama), or cast rays without OpenGL."""
+        li = self.lidar
+        if self.lidar_method == "panorama":
+            try:
+                return self.world.lidar_scan(li.model, li.T_body_sensor, method="panorama")
+            except GLUnavailable:
+                self.lidar_method = "rays"
+        return self.world.lidar_scan(li.model, li.T_body_sensor, method="rays")
 
     def _header(self, ctx: EpisodeContext, config: dict) -> None:
         sc, world, cfg, vmap = self.sc, self.world, self.cfg, self.vmap
         self.rec.header(
             scenario=sc.name, source=sc.source, seed=self.seed, perception=self.labels["perception"],
-            planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map,
+            planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map, rig=cfg.rig,
+            sensors=[{"name": s.name, "kind": s.kind} for s in ctx.sensors],
             frame_latency=cfg.frame_latency,
             rates={"control": ctx.rates.control, "camera": sc.rates.camera, "plan": cfg.plan_rate, "map": ctx.rates.map},
             corridor={"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
@@ -272,7 +319,14 @@ class _Loop:
         """One camera frame: perception (timed without numba's compilation), the map and the seen space
         every ``map_every`` frames, the log, the viewer."""
         cfg, vmap, seen = self.cfg, self.vmap, self.seen
+        others = self.world.latest_extra_frames() if self.other_cameras else ()
+        scan = self._scan() if self.lidar is not None and self.n_frames % self.lidar_every == 0 else None
         c0, t0 = self.timer.seconds, time.perf_counter()
+        if others:
+            self.perception.observe("observe_cameras", others, frame.stamp)
+        if scan is not None:
+            self.perception.observe("observe_lidar", scan, frame.stamp)
+            self.map_scan = scan  # for the map's next update
         po = self.perception.update(frame, truth if self.truth_for_perception else None)
         perc_ms = (time.perf_counter() - t0 - (self.timer.seconds - c0)) * 1e3
         if po.skipped is None:
@@ -283,11 +337,14 @@ class _Loop:
                 seen.observe_map(self.seen_blocked, frame.intrinsics, frame.T_world_camera, frame.stamp,
                                  occluders=[(o.center, o.size) for o in po.obstacles])
             else:
-                depth_m, _ = frame.depth_m_counted()
-                m = vmap.update(depth_m, frame.intrinsics, frame.T_world_camera, dynamic_boxes=po.clear_boxes,
-                                stamp=frame.stamp)
-                seen.observe_depth(depth_m, frame.intrinsics, frame.T_world_camera, frame.stamp)
-                map_ms = m.get("ms")
+                views = [(f.depth_m_counted()[0], f.intrinsics, f.T_world_camera) for f in (frame, *others)]
+                if self.map_scan is not None:  # the LiDAR's returns, as depth images around it (dodt.lidar_views)
+                    li = self.lidar.model
+                    views += scan_depth_views(self.map_scan, li.elevation_min, li.elevation_max)
+                    self.map_scan = None
+                map_ms = vmap.update_views(views, dynamic_boxes=po.clear_boxes, stamp=frame.stamp)["ms"]
+                for depth_m, K, T in views:
+                    seen.observe_depth(depth_m, K, T, frame.stamp)
         self.n_frames += 1
         self.rec.frame(frame.stamp, truth, po, perc_ms, map_ms)
         self.rec.map_snapshot(t, vmap)

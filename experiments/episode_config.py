@@ -32,6 +32,8 @@ class EpisodeConfig:
     # the camera's renderer (sim.camera: auto, gl, pybullet, tiny); None: the scenario's. Changes the images
     # (gl and pybullet draw the same geometry, shaded differently), so outcomes are compared per renderer
     renderer: str | None = None
+    # the drone's sensors (sim.rig): front (the paper's forward camera), front_back, surround4, lidar
+    rig: str = "front"
 
     def __post_init__(self):
         # each value's type and range: experiments.config_limits, the one table of the configuration's limits

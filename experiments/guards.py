@@ -228,6 +228,13 @@ class PerceptionGuard:
         """The module's reset(context); a failure is counted, and the episode goes on (its updates are guarded)."""
         _guarded(lambda: reset_with_context(self.perception, context), self.errors, 0.0)
 
+    def observe(self, method: str, data, stamp: float) -> None:
+        """The module's ``observe_lidar(scan)`` or ``observe_cameras(frames)`` when it has one (a module
+        without it reads the first camera alone); a failure is counted, and the episode goes on."""
+        observe = getattr(self.perception, method, None)
+        if callable(observe):
+            _guarded(lambda: observe(data), self.errors, stamp)
+
     def update(self, frame, truth) -> PerceptionOutput:
         out, kind = _guarded(lambda: check_output(self.perception.update(frame, truth)), self.errors, frame.stamp)
         if out is not None:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dodt.config import DODTConfig
-from dodt.context import EpisodeContext
+from dodt.context import CameraSensor, EpisodeContext, LidarSensor
 from dodt.frames import SensorFrame
 from dodt.geometry import half_view, wrap_angle
 from dodt.pipeline import DODT
@@ -142,6 +142,9 @@ class DODTPerception:
     def reset(self, context: EpisodeContext | None = None) -> None:
         self.dodt.reset()
         smap = None if context is None else context.static_map
+        lidar = next((s for s in context.sensors if isinstance(s, LidarSensor)), None) if context else None
+        self.dodt.set_scene(smap, None if context is None else context.geofence,
+                            None if lidar is None else lidar.model.elevation_min)
         self.structure_test = None if smap is None else smap.established_fraction
         self._on_structure = set()
         self._passed = set()
@@ -188,6 +191,12 @@ class DODTPerception:
             return False  # beside or behind the camera: nothing to tell from the image
         lowest = T[:3, :3] @ np.array([q[0] * near / q[2], (K.height - 1 - K.cy) * near / K.fy, near]) + T[:3, 3]
         return bottom <= lowest[2] + self.moving_rule.bottom_edge_tolerance and top >= lo
+
+    def observe_lidar(self, scan) -> None:
+        self.dodt.observe_lidar(scan)
+
+    def observe_cameras(self, frames) -> None:
+        self.dodt.observe_cameras(frames)
 
     def update(self, frame: SensorFrame, truth=None) -> PerceptionOutput:
         r = self.dodt.process(frame)
@@ -268,6 +277,11 @@ class OraclePerception:
         self.reset()
 
     def reset(self, context: EpisodeContext | None = None) -> None:
+        # the rig's other sensors: (yaw of each other camera from the first [rad]; whether a LiDAR sees all round)
+        sensors = () if context is None else context.sensors
+        cams = [s for s in sensors if isinstance(s, CameraSensor)]
+        self._other_yaws = tuple(wrap_angle(c.yaw_on_body - cams[0].yaw_on_body) for c in cams[1:])
+        self._lidar = any(isinstance(s, LidarSensor) for s in sensors)
         self._last_seen: dict[int, float] = {}
         self._first_seen: dict[int, float] = {}  # id -> when it came into view after being lost
         self._velocities: dict[int, deque] = {}  # id -> (stamp, true velocity) over accel_window
@@ -308,7 +322,8 @@ class OraclePerception:
                 continue
             acc = self._acceleration(o.id, truth.stamp, o.velocity)
             vel = o.velocity + self._velocity_error(o.id, truth.stamp)
-            in_view = oracle_view(cam, heading, half_fov, o, self.cfg.max_range, self.all_around)[0]
+            in_view = oracle_view(cam, heading, half_fov, o, self.cfg.max_range, self.all_around or self._lidar)[0] \
+                or any(oracle_view(cam, heading + y, half_fov, o, self.cfg.max_range)[0] for y in self._other_yaws)
             seen = self._last_seen.get(o.id)
             if in_view:
                 if seen is None or truth.stamp - seen > self.cfg.memory:

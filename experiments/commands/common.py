@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 from typing import Callable, Iterable
 
+from experiments.config_limits import RIG_NAMES
 from sim.scenario import RENDERER_CHOICES
 
 
@@ -157,7 +158,7 @@ def settings(args, perceptions=None):
 
 
 # episode options and the episode.* keys they stand for: giving both is refused (which one would win?)
-EPISODE_OPTIONS = {"static_map": "--map", "frame_latency": "--frame-latency", "renderer": "--renderer",
+EPISODE_OPTIONS = {"rig": "--rig", "static_map": "--map", "frame_latency": "--frame-latency", "renderer": "--renderer",
                    "duration": "--duration"}
 
 
@@ -197,6 +198,7 @@ def add_episode_options(parser: argparse.ArgumentParser) -> None:
     EpisodeConfig; not imported here: it loads the simulator), with --planner, --config and --set. Their
     defaults are None: an option given is told apart from one left out (episode_config)."""
     parser.add_argument("--renderer", choices=RENDERER_CHOICES, default=None, help=RENDERER_HELP)
+    add_rig_option(parser)
     parser.add_argument("--map", choices=("depth", "truth"), default=None,
                         help="static map: depth (built from the camera, default) or truth (the scenario's geometry "
                              "known from the start; with the oracles or static-only nothing is rendered: a "
@@ -205,6 +207,13 @@ def add_episode_options(parser: argparse.ArgumentParser) -> None:
                         help="camera periods between a frame's capture and its perception (default 1: the next "
                              "frame renders in a second process meanwhile; 0: at once, as before)")
     add_config_options(parser)
+
+
+def add_rig_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--rig", choices=RIG_NAMES, default=None,
+                        help="the drone's sensors: front (the paper's forward RGB-D camera, default), front_back, "
+                             "surround4 (four cameras 90 deg apart), lidar (a Mid-360-like LiDAR on top and the "
+                             "forward camera)")
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:

@@ -10,6 +10,7 @@ from experiments.episode import EpisodeConfig, run_episode
 from experiments.episode_log import map_snapshots, read_log
 from experiments.episode_metrics import summarize
 from experiments.perception_modes import PerceptionOutput
+from experiments.registry import make_perception
 from planner.types import ObstaclePrediction
 
 # A person walks across the corridor at x = 5 while the drone flies from x = 1 to x = 9: without
@@ -195,3 +196,35 @@ def test_frames_carry_colour_only_for_a_perception_that_reads_it(renderer):
     from experiments.registry import make_perception
 
     assert make_perception("dodt").uses_color is False and make_perception("oracle").uses_color is False
+
+
+def test_a_lidar_rig_episode_fuses_the_scans_and_says_its_rig(tmp_path):
+    sc = make_scenario(CROSSING)
+    seen = []
+
+    class Spy:
+        """DODT, counting the scans it is handed and keeping the context's sensors."""
+        name = "spy"
+
+        def __init__(self):
+            self.inner = make_perception("dodt")
+            self.scans = 0
+
+        def reset(self, context):
+            seen.extend(type(s).__name__ for s in context.sensors)
+            self.inner.reset(context)
+
+        def observe_lidar(self, scan):
+            self.scans += 1
+            self.inner.observe_lidar(scan)
+
+        def update(self, frame, truth=None):
+            return self.inner.update(frame, truth)
+
+    spy = Spy()
+    s = run_episode(sc, seed=3, perception=spy, cfg=EpisodeConfig(duration=1.5, rig="lidar"), out=tmp_path)
+    assert s["rig"] == "lidar" and s["config"]["episode"]["rig"] == "lidar"
+    assert seen == ["CameraSensor", "LidarSensor"]
+    assert 14 <= spy.scans <= 16  # 10 Hz over 1.5 s
+    header = read_log(tmp_path / "log.jsonl.gz")[0]
+    assert header["rig"] == "lidar" and [x["kind"] for x in header["sensors"]] == ["rgbd", "lidar"]

@@ -6,10 +6,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from dodt.context import CameraSensor, LidarSensor
 from dodt.frames import CameraIntrinsics
 from experiments.perception_modes import OracleConfig, OraclePerception
 from experiments.registry import known_modes, make_perception
 from sim.ground_truth import ObstacleTruth
+from sim.lidar import LidarModel, top_mount
+from sim.rig import yaw_matrix
+from tests.context_factory import example_context
 
 
 def _truth(stamp, people_xy):
@@ -261,3 +265,20 @@ def test_the_planner_gets_the_tracks_but_not_the_filters_overstated_std(monkeypa
     assert [o.position_std for o in out.obstacles] == [0.0, 0.0]
     default = ObstaclePrediction(0, np.zeros(3), np.ones(3))
     assert [o.std_growth for o in out.obstacles] == [default.std_growth] * 2 and default.std_growth > 0
+
+
+def _rig_context(*sensors):
+    return replace(example_context(), sensors=example_context().sensors + tuple(sensors))
+
+
+def test_the_oracle_sees_whom_some_sensor_of_the_rig_could_see():
+    front = _rig_context().camera
+    T_back = front.T_body_sensor.copy()
+    T_back[:3, :3] = yaw_matrix(180.0) @ T_back[:3, :3]
+    back = CameraSensor("back", front.intrinsics, T_back, rate=30.0, max_depth=10.0)
+    people = [AHEAD, BEHIND, SIDE, FAR]
+    for ctx, seen in ((_rig_context(), {1}), (_rig_context(back), {1, 2}),
+                      (_rig_context(LidarSensor("top", LidarModel(), top_mount(), 10.0)), {1, 2, 3})):
+        p = make_perception("oracle")
+        p.reset(ctx)
+        assert {o.id for o in p.update(FRAME, _truth(0.0, people)).obstacles} == seen
