@@ -186,7 +186,8 @@ class TrackConfig:
     # max_speed x the time since then, plus this, plus half the larger horizontal extent of the two
     # boxes (a box's centre moves by up to half its change of extent as more of the obstacle comes
     # into view), is no motion a person makes: the track is re-initialised there (its filter,
-    # velocity and histories start again; it keeps its id). None: never (the paper)
+    # velocity, histories and labels start again, under a new id: what a consumer keeps by id
+    # belonged to the obstacle it tracked before). None: never (the paper)
     jump_margin: float | None = 0.4
     # m: the camera's body around its position. A coasting track whose prediction would bring its
     # centre nearer the camera than this plus the track's half width (and nearer than it was) is held

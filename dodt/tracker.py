@@ -258,9 +258,11 @@ class Track:
             + 0.5 * max(self.last_extent, float(max(det.size[0], det.size[1])))
         return float(np.hypot(*(det.center[:2] - self.last_center))) > reach
 
-    def restart(self, det: Detection, seq: int, stamp: float) -> None:
-        """Re-initialise the track at ``det`` (filter, velocity, histories, labels, age), keeping its id."""
-        self.__init__(self.id, det, seq, stamp, self.cfg, self.clock)
+    def restart(self, tid: int, det: Detection, seq: int, stamp: float) -> None:
+        """Re-initialise the track at ``det`` (filter, velocity, histories, labels, age) under the new id
+        ``tid``: what a consumer keeps by id (a moving-track rule's memory, a planner's) belonged to
+        the obstacle it tracked before."""
+        self.__init__(tid, det, seq, stamp, self.cfg, self.clock)
         self._h0 = self._h1 = 0  # Tracker.correct adds this frame's centre, as to every matched track
 
     def bound_prediction(self, dt: float) -> None:
@@ -574,7 +576,8 @@ class Tracker:
         for ti, di in pairs:
             tr = self.tracks[ti]
             if tr.jumped(dets[di], stamp):  # no person moves that far: an obstacle seen anew
-                tr.restart(dets[di], seq, stamp)
+                tr.restart(self._next_id, dets[di], seq, stamp)
+                self._next_id += 1
                 self.restarts += 1
             else:
                 tr.update(dets[di], seq, stamp)
