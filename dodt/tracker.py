@@ -343,6 +343,7 @@ class Track:
         self.filter_speed = self.kf.limit_speed(self.cfg.track.max_speed)
         self.seen_xy = self.kf.position.copy()
         self.unseen_time = 0.0
+        self.before_predict = None  # measured since: no prediction to hold back
         self.last_center = det.center[:2].astype(float)
         self.last_extent = float(max(det.size[0], det.size[1]))
         self.observations.append(_Observation(seq, stamp, anchor.copy(), v, lifted))
