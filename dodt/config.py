@@ -176,6 +176,24 @@ class TrackConfig:
     # off every person. Other tracks are left alone: the coasting tracks that fast in the closed
     # loop are nearly all static-labelled pieces of wall seen from the moving drone
     max_coast_speed: float = 2.5  # m/s
+    # Physical bounds (ours). m/s: a person's top speed here (people walk at up to 1.6 m/s; a brisk
+    # walk or a jog stays under it). No track's filter velocity exceeds it: the velocity is clamped
+    # after every update and prediction, so that no hidden velocity carries a track, and a prediction
+    # stays within this speed x the time since the track's last measurement of where it was measured.
+    # None: unbounded (the paper)
+    max_speed: float | None = 2.5
+    # m: a matched detection whose centre lies farther from the track's last measured centre than
+    # max_speed x the time since then, plus this, plus half the larger horizontal extent of the two
+    # boxes (a box's centre moves by up to half its change of extent as more of the obstacle comes
+    # into view), is no motion a person makes: the track is re-initialised there (its filter,
+    # velocity, histories and labels start again, under a new id: what a consumer keeps by id
+    # belonged to the obstacle it tracked before). None: never (the paper)
+    jump_margin: float | None = 0.4
+    # m: the camera's body around its position. A coasting track whose prediction would bring its
+    # centre nearer the camera than this plus the track's half width (and nearer than it was) is held
+    # where it was, its velocity toward the camera removed: nothing passes through the camera.
+    # None: off
+    camera_body_radius: float | None = 0.3
     output_history: float = 3.0  # s of centre history kept and output (the paper's figures show 3 s)
     # output size: exponential smoothing weight of the new detection, per frame at reference_rate (ours)
     size_smoothing: float = 0.3

@@ -110,6 +110,14 @@ class KalmanFilter:
         self.x = self.x + K @ y
         self.P = (np.eye(self.n) - K @ H) @ self.P
 
+    def limit_speed(self, v_max: float | None) -> float:
+        """Scale the state's velocity down to at most ``v_max`` (m/s; None: no bound), keeping its
+        direction. Returns the speed before (what the filter alone would have said)."""
+        speed = float(np.hypot(self.x[2], self.x[3]))
+        if v_max is not None and speed > v_max:
+            self.x[2:4] *= v_max / speed
+        return speed
+
     @property
     def position(self) -> np.ndarray:
         return self.x[:2]

@@ -41,7 +41,7 @@ class TrackReport:
     id: int
     center: np.ndarray  # (3,) m
     size: np.ndarray  # (3,) m, full extents of the axis-aligned box
-    velocity: np.ndarray  # (3,) m/s, the velocity reported (zero for a track labelled static)
+    velocity: np.ndarray  # (3,) m/s, the velocity reported (DODT: its filter's, whatever the label)
     dynamic: bool  # labelled a moving object
     coasting: bool = False  # not measured this frame: a prediction
     acceleration: np.ndarray | None = None  # (3,) m/s^2

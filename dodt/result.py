@@ -11,9 +11,9 @@ class TrackedObstacle:
     id: int
     center: np.ndarray  # (3,) world [m]; x, y filtered, z from the latest detection
     size: np.ndarray  # (3,) [m]
-    # (3,) [m/s], z = 0; zero for a track identified static: a static obstacle says it is still
+    # (3,) [m/s], z = 0: the filter's velocity (at most track.max_speed), whatever the label
     velocity: np.ndarray
-    acceleration: np.ndarray  # (3,) [m/s^2], z = 0; zero for a static track
+    acceleration: np.ndarray  # (3,) [m/s^2], z = 0: the filter's acceleration, whatever the label
     dynamic: bool
     coasting: bool  # no detection this frame: the state is the Kalman prediction
     age: float  # s since the track was born
@@ -21,8 +21,8 @@ class TrackedObstacle:
     is_person: bool = False
     position_std: float = 0.0  # m, predicted horizontal position uncertainty
     # (3,) [m/s] and [m/s^2], z = 0: the tracking filter's velocity and acceleration whatever the
-    # label, for a consumer that second-guesses the static label (a static obstacle whose box grows
-    # or shifts as more of it comes into view has some); None: as ``velocity``, ``acceleration``
+    # label (DODT reports them as ``velocity`` and ``acceleration`` too; another module may report a
+    # static track still); None: as ``velocity``, ``acceleration``
     filter_velocity: np.ndarray | None = None
     filter_acceleration: np.ndarray | None = None
 

@@ -7,6 +7,11 @@ history, paper eq. for V_t and A_t); an unmatched track coasts on its prediction
 ``coast_time`` seconds (the paper drops it at once) and keeps its id if its obstacle comes
 back; unmatched detections start tracks. Then each track is identified static or dynamic.
 
+Physical bounds (track.max_speed, track.jump_margin, track.camera_body_radius; ours): no filter
+velocity exceeds a person's top speed, a prediction stays within that speed of where the track was
+last measured, a detection farther from the track than a person could have moved re-initialises
+it, and a coasting prediction does not pass through the camera's body.
+
 Every window is a span of time (dodt.config's module docstring, dodt.windows).
 """
 from __future__ import annotations
@@ -116,6 +121,16 @@ class Track:
         self.sensor = det.sensor
         self.by_lidar = det.source == "lidar"
         self.missed = 0  # consecutive frames without a detection
+        # the physical bounds (module docstring): where the filter put the track at its last
+        # measurement, the time predicted since, the box centre and widest horizontal side of the
+        # last detection, the filter's speed before it was bounded (m/s), and the position before
+        # the latest prediction (None: not predicted yet)
+        self.seen_xy = self.kf.position.copy()
+        self.unseen_time = 0.0
+        self.last_center = det.center[:2].astype(float)
+        self.last_extent = float(max(det.size[0], det.size[1]))
+        self.filter_speed = 0.0
+        self.before_predict: np.ndarray | None = None
         self.headings: deque[tuple[float, float]] = deque()  # (stamp, heading of the pseudo-measured velocity)
 
     @property
@@ -235,6 +250,67 @@ class Track:
             self.person_votes.append(det.is_person)
             keep_last(self.person_votes, self.clock.intervals(self.cfg.learned.person_span) + 1)
 
+    def jumped(self, det: Detection, stamp: float) -> bool:
+        """Whether ``det``'s centre lies farther from the last detection's than a person moves in
+        the time between them (track.max_speed), plus track.jump_margin, plus half the larger
+        horizontal extent of the two boxes."""
+        tc = self.cfg.track
+        if tc.jump_margin is None or tc.max_speed is None:
+            return False
+        reach = tc.max_speed * max(stamp - self.last_seen, 0.0) + tc.jump_margin \
+            + 0.5 * max(self.last_extent, float(max(det.size[0], det.size[1])))
+        return float(np.hypot(*(det.center[:2] - self.last_center))) > reach
+
+    def restart(self, tid: int, det: Detection, seq: int, stamp: float) -> None:
+        """Re-initialise the track at ``det`` (filter, velocity, histories, labels, age) under the new id
+        ``tid``: what a consumer keeps by id (a moving-track rule's memory, a planner's) belonged to
+        the obstacle it tracked before."""
+        self.__init__(tid, det, seq, stamp, self.cfg, self.clock)
+        self._h0 = self._h1 = 0  # Tracker.correct adds this frame's centre, as to every matched track
+
+    def bound_prediction(self, dt: float) -> None:
+        """After a prediction over ``dt`` seconds: the velocity at most track.max_speed, and the
+        position within max_speed x the time predicted since the last measurement of where the
+        filter put the track then."""
+        v_max = self.cfg.track.max_speed
+        self.filter_speed = max(self.filter_speed, self.kf.limit_speed(v_max))
+        self.unseen_time += dt
+        if v_max is None:
+            return
+        d = self.kf.position - self.seen_xy
+        dist, reach = float(np.hypot(d[0], d[1])), v_max * self.unseen_time
+        if dist > reach:
+            self.kf.x[:2] = self.seen_xy + d * (reach / dist)
+
+    def hold_off_camera(self, camera: np.ndarray) -> bool:
+        """Hold a prediction that would pass through the camera's body: when the centre's path
+        over the latest prediction comes nearer the camera (horizontally) than
+        track.camera_body_radius plus the track's half width, and nearer than it started, the
+        position goes back to where it was and the velocity toward the camera is removed. Returns
+        whether it was held."""
+        r_body = self.cfg.track.camera_body_radius
+        if r_body is None or self.before_predict is None:
+            return False
+        cam = np.asarray(camera, float)[:2]
+        c0, c1 = self.before_predict + self.offset, self.center_xy
+        step = c1 - c0
+        n2 = float(step @ step)
+        s_closest = 0.0 if n2 == 0.0 else min(max(float((cam - c0) @ step) / n2, 0.0), 1.0)
+        nearest = float(np.hypot(*(c0 + s_closest * step - cam)))
+        start = float(np.hypot(*(c0 - cam)))
+        if not (nearest < r_body + self.half_width and nearest < start - 1e-9):
+            return False
+        self.kf.x[:2] = self.before_predict
+        v = self.kf.x[2:4]
+        if start > 0.0:
+            out = (c0 - cam) / start  # unit vector from the camera to the track
+            toward = float(v @ out)
+            if toward < 0.0:
+                v -= toward * out
+        else:
+            v[:] = 0.0
+        return True
+
     def update(self, det: Detection, seq: int, stamp: float) -> None:
         k = self.cfg.kalman
         n_avg = max(1, self.clock.intervals(k.averaging_time))  # 10 observations back at 30 Hz
@@ -267,6 +343,12 @@ class Track:
         ray = None if not cut else np.array([-det.sides.axis[1], det.sides.axis[0]])
         self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window, weak_axis=ray,
                        weak_factor=CUT_RANGE_NOISE)
+        self.filter_speed = self.kf.limit_speed(self.cfg.track.max_speed)
+        self.seen_xy = self.kf.position.copy()
+        self.unseen_time = 0.0
+        self.before_predict = None  # measured since: no prediction to hold back
+        self.last_center = det.center[:2].astype(float)
+        self.last_extent = float(max(det.size[0], det.size[1]))
         self.observations.append(_Observation(seq, stamp, anchor.copy(), v, lifted))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
@@ -382,9 +464,10 @@ class Track:
         return K.fx * pc[0] / pc[2] + K.cx, K.fy * pc[1] / pc[2] + K.cy, half_w, half_h
 
     def output(self, stamp: float) -> TrackedObstacle:
-        """The track as reported. A track identified static reports zero velocity and acceleration:
-        its filter's velocity is then mostly the drift of a box whose visible part changes as the
-        camera moves, not motion; ``filter_velocity`` and ``filter_acceleration`` keep them."""
+        """The track as reported: with the velocity and acceleration the filter holds (bounded by
+        track.max_speed), whatever its label. A track identified static reports them too: a zero
+        report would hide a velocity that still moves its prediction (``filter_velocity`` and
+        ``filter_acceleration`` are the same)."""
         h = self._hist[self._h0:self._h1]
         recent = h[:, 0] >= stamp - self.cfg.track.output_history
         h = h.copy() if recent.all() else h[recent]
@@ -395,10 +478,10 @@ class Track:
         a[:2] = self.kf.acceleration
         return TrackedObstacle(
             id=self.id, center=self.center, size=self.size.copy(),
-            velocity=v if dynamic else np.zeros(3), acceleration=a if dynamic else np.zeros(3),
+            velocity=v, acceleration=a,
             dynamic=dynamic, coasting=self.coasting, age=stamp - self.born,
             history=h, is_person=person,
-            position_std=float(np.sqrt(self.kf.position_variance)), filter_velocity=v, filter_acceleration=a)
+            position_std=float(np.sqrt(self.kf.position_variance)), filter_velocity=v.copy(), filter_acceleration=a.copy())
 
 
 class Tracker:
@@ -407,6 +490,7 @@ class Tracker:
         self.tracks: list[Track] = []
         self._next_id = 1
         self.clock = FrameClock(cfg.reference_rate)
+        self.restarts = 0  # tracks re-initialised after a jump (Track.jumped)
 
     def reset(self) -> None:
         self.tracks = []
@@ -416,7 +500,9 @@ class Tracker:
         for t in self.tracks:
             if t.coasting and t.kf.ca:
                 t.kf.x[4:6] = 0.0  # unobserved acceleration would run away: coast at constant velocity
+            t.before_predict = t.kf.position.copy()
             t.kf.predict(dt, q_scale)
+            t.bound_prediction(dt)
 
     def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> int:
         """Delete coasting tracks whose predicted place is in view and seen through: the camera
@@ -526,16 +612,25 @@ class Tracker:
         matched_t = {t for t, _ in pairs}
         matched_d = {d for _, d in pairs}
         for ti, di in pairs:
-            self.tracks[ti].update(dets[di], seq, stamp)
+            tr = self.tracks[ti]
+            if tr.jumped(dets[di], stamp):  # no person moves that far: an obstacle seen anew
+                tr.restart(self._next_id, dets[di], seq, stamp)
+                self._next_id += 1
+                self.restarts += 1
+            else:
+                tr.update(dets[di], seq, stamp)
         survivors = []
         for i, tr in enumerate(self.tracks):
             if i not in matched_t:
                 if stamp - tr.last_seen > self._coast_time(tr, camera):
                     continue  # lost for too long
-                if tr.is_person and float(np.linalg.norm(tr.kf.velocity)) > self.cfg.track.max_coast_speed:
+                # the filter's speed before track.max_speed bounded it
+                if tr.is_person and tr.filter_speed > self.cfg.track.max_coast_speed:
                     continue  # a person faster than people walk: a velocity made of noise
                 tr.coasting = True
                 tr.missed += 1
+                if camera is not None:
+                    tr.hold_off_camera(camera)
             survivors.append(tr)
             c = tr.center_xy
             tr.add_history(stamp, float(c[0]), float(c[1]), tr.z)

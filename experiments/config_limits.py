@@ -426,6 +426,9 @@ LIMITS: dict[str, Limit] = {
     "dodt.track.seen_through_fraction": _FRACTION,
     "dodt.track.seen_through_margin": _real(0.0, 10.0),  # m
     "dodt.track.max_coast_speed": _SPEED,
+    "dodt.track.max_speed": _real(0.0, 10.0, lo_open=True, optional=True),  # m/s; none: unbounded
+    "dodt.track.jump_margin": _real(0.0, 10.0, optional=True),  # m; none: never re-initialised
+    "dodt.track.camera_body_radius": _real(0.0, 5.0, optional=True),  # m; none: off
     "dodt.track.output_history": _HISTORY,
     "dodt.track.size_smoothing": _FRACTION,  # weight per frame
     "dodt.identification.method": _one_of("voting", "velocity"),

@@ -15,6 +15,10 @@ sim.world.CLEARANCE_CAP; the cap itself means "at least this far"), and the leas
 in the shipped scenarios), and counted there the wall behind the drone at take-off would set it
 in every episode, whatever the flight. It is None when the drone never left those zones. A touch
 of any structure is a collision all the same (``collisions``).
+
+``track_life``: the perception benchmark's track-life figures (experiments.perception_metrics.TrackLife)
+from the frames' records: the tracks perception reported against the people of the ground truth, the
+drone's position standing for the sensor's (continuity counts the people within 5 m of the drone).
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ import numpy as np
 
 from experiments.episode_log import iter_log
 from experiments.fault import at_fault, classify
+from experiments.perception_metrics import TrackLife
 
 END_ZONE_RADIUS = 1.0  # m, horizontal, around the start and the goal: structure clearance is not counted there
 
@@ -71,6 +76,7 @@ def summarize(records: Iterable[dict]) -> dict:
     solve_ms, perc_ms, map_ms = array("d"), array("d"), array("d")
     n_frames = n_skipped = 0
     collisions = []
+    life = TrackLife()
     for r in records:
         k = r["k"]
         if k == "s":
@@ -91,6 +97,10 @@ def summarize(records: Iterable[dict]) -> dict:
             n_skipped += bool(r.get("skipped"))
             _finite_times(perc_ms, r.get("perc_ms"))
             _finite_times(map_ms, r.get("map_ms"))
+            if "p" in r:  # the drone's position, which the recorder writes with every frame
+                life.add(r["t"], r["p"], [(o["id"], o["center"], o.get("velocity", (0.0, 0.0, 0.0)), o["dynamic"])
+                                          for o in r.get("tracks", ())],
+                         [(o["id"], [(a + b) / 2 for a, b in zip(o["lo"], o["hi"])]) for o in r.get("people", ())])
         elif k == "plan":
             statuses["plans"] += 1
             statuses["fallbacks"] += r["status"].startswith("fallback")
@@ -152,6 +162,7 @@ def summarize(records: Iterable[dict]) -> dict:
         "sim_time": round(t_end, 3),
         "planner_stats": statuses,
         "perception_stats": {"frames": n_frames, "skipped": n_skipped},
+        "track_life": life.summary(),
         "timing": {
             "planner_solve_ms": timing_stats(solve_ms),
             "perception_ms": timing_stats(perc_ms),

@@ -1,16 +1,19 @@
 """`dodt-nav perceive SEQUENCE --out DIR`: DODT on a recorded RGB-D sequence.
 
-Reads a TUM RGB-D folder or a `dodt-nav simulate` output (experiments.sequences), runs a DODT
-configuration on every frame (or on the frames decimated to ``--rate``), and writes into DIR:
+Reads a TUM RGB-D folder, a `dodt-nav simulate` output or a plain folder of depth (and colour)
+images (experiments.sequences), runs a DODT configuration on every frame (or on the frames decimated
+to ``--rate``; a folder whose frames have no timestamps was recorded at ``--rate``), and writes into DIR:
 
     tracks.jsonl     one line per frame: seq, stamp, skipped (why, or null), bad pixels, and
                      every reported obstacle (TrackedObstacle.to_json)
     timings.csv      per frame, each module's milliseconds
     summary.json     the sequence, the configuration (every value), where the poses came from
                      (the floor fit's height, pitch and roll), frames read / processed / skipped
-                     and why, per-module median and p95 milliseconds (after the first frame,
-                     which compiles the pipeline's kernels), track counts, and, for a
-                     simulated sequence with its ground truth, the perception benchmark's figures
+                     and why, where the stamps came from, per-module median and p95
+                     milliseconds (after the first frame, which compiles the pipeline's kernels),
+                     track counts, the warnings (a floor fit that puts the camera at an
+                     implausible height: a wrong depth scale), and, for a simulated sequence
+                     with its ground truth, the perception benchmark's figures
     annotated/       with --images: each frame with the tracks' boxes drawn (red dynamic, green
                      static, thin while coasting; id and speed), and the learned detector's 2D boxes
     annotated.mp4    with --video: the same as a video
@@ -26,6 +29,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -41,6 +45,26 @@ from dodt.protocol import TrackReport
 from experiments.sequences import SequenceError, open_sequence
 
 FLOOR_FRAMES = 10  # the first readable frames the floor is fitted on
+# m: the heights above the floor a camera plausibly has (a drone's, a handheld's, a mounted one's).
+# A fit outside them most likely read the depth at the wrong scale: millimetre images read at TUM's
+# 5000 units per metre put a camera 2.35 m up at 0.47 m. A ground robot's camera lower than the
+# lower bound gets the warning too, which its user can then ignore.
+PLAUSIBLE_CAMERA_HEIGHT = (0.5, 3.0)
+DEPTH_FACTORS = (1000.0, 5000.0)  # depth units per metre of millimetre images and of TUM RGB-D's
+
+
+def depth_scale_warning(height: float, factor: float) -> str | None:
+    """One line when a floor fit's camera ``height`` (m) is implausible (PLAUSIBLE_CAMERA_HEIGHT) for
+    depth read at ``factor`` units per metre, naming the common factors that would put it in range;
+    None when it is plausible."""
+    lo, hi = PLAUSIBLE_CAMERA_HEIGHT
+    if lo <= height <= hi:
+        return None
+    fixes = [f"--depth-factor {f:g} would put it {height * factor / f:.2f} m up" for f in DEPTH_FACTORS
+             if abs(f - factor) > 1e-9 and lo <= height * factor / f <= hi]
+    return (f"the floor fit puts the camera {height:.2f} m above the floor, outside the plausible {lo:g}-{hi:g} m: "
+            f"is the depth scale right? The depth was read at {factor:g} units per metre"
+            + (f"; {'; '.join(fixes)}" if fixes else "; give the right one with --depth-factor"))
 
 
 def build_config(name: str, assignments=(), detector: str | None = None, layout: str = "auto",
@@ -187,9 +211,10 @@ def perceive(sequence: str | Path, out: str | Path, config: str = "dodt", assign
              roll: float = 0.0, rate: float | None = None, max_frames: int | None = None, images: bool = False,
              video: bool = False, detector: str | None = None, detector_layout: str = "auto",
              person_class: int = 0, detector_input: tuple[int, int] | None = None,
-             progress: bool = False) -> dict:
+             progress: bool = False, warn=None) -> dict:
     """Run DODT on a recorded sequence and write what the module docstring lists. Returns the
-    summary. Mistakes in the options or the sequence raise a SequenceError naming them."""
+    summary. Mistakes in the options or the sequence raise a SequenceError naming them. ``warn``:
+    called with each warning (one line) as it arises; the summary lists them too."""
     if rate is not None and not (math.isfinite(rate) and rate > 0):
         raise SequenceError(f"--rate: must be a frame rate above 0 Hz, got {rate}")
     if max_frames is not None and max_frames < 1:
@@ -202,7 +227,8 @@ def perceive(sequence: str | Path, out: str | Path, config: str = "dodt", assign
         raise SequenceError(f"--camera-height: must be above 0 m, got {camera_height}")
     cfg = build_config(config, assignments, detector, detector_layout, person_class, detector_input)
     seq = open_sequence(sequence, intrinsics, fx, fy, cx, cy, depth_factor,
-                        "none" if camera_height is not None else poses)
+                        "none" if camera_height is not None else poses, rate=rate)
+    warnings: list[str] = []
     has_poses = any(r.T_world_camera is not None for r in seq.refs)
     fixed, transform, floor = None, None, None
     if camera_height is not None:
@@ -210,6 +236,11 @@ def perceive(sequence: str | Path, out: str | Path, config: str = "dodt", assign
         pose_source = f"fixed: height {camera_height} m, pitch {pitch} deg, roll {roll} deg"
     elif fit_floor:
         fixed, transform, floor = _floor_pose(seq, has_poses)
+        w = depth_scale_warning(floor["height_m"], 1.0 / seq.depth_scale)
+        if w is not None:
+            warnings.append(w)
+            if warn is not None:
+                warn(w)
         pose_source = ("floor fit, fixed camera" if fixed is not None else f"{seq.pose_source}, turned to the floor fit")
     elif has_poses:
         pose_source = seq.pose_source
@@ -297,15 +328,15 @@ def perceive(sequence: str | Path, out: str | Path, config: str = "dodt", assign
         "sequence": str(seq.root), "format": seq.format, "frames_listed": len(seq.refs), "frames_read": read,
         "frames_processed": processed, "skipped": dict(sorted(skipped.items())),
         "sequence_counters": dict(seq.counters), "pipeline_counters": dict(pipeline.counters),
-        "frame_rate_hz": _frame_rate(stamps), "rate_asked_hz": rate,
+        "frame_rate_hz": _frame_rate(stamps), "rate_asked_hz": rate, "stamps": seq.stamp_source,
         "intrinsics": asdict(seq.intrinsics), "depth_scale_m": seq.depth_scale, "poses": pose_source,
         "floor_fit": floor, "configuration": config, "set": list(assignments), "config": _jsonable(asdict(cfg)),
         # the first frame compiles the pipeline's numba kernels: not counted when there are others
         "timings_ms": {m: _stats(v[1:] if len(v) > 1 else v) for m, v in timings.items()},
         "tracks": len(track_ids), "dynamic_tracks": len(dynamic_ids), "frames_with_dynamic": frames_with_dynamic,
-        "wall_time_s": round(wall, 2),
+        "wall_time_s": round(wall, 2), "warnings": warnings,
     }
-    if cfg.learned.enabled and not cfg.learned.model and seq.format == "tum":
+    if cfg.learned.enabled and not cfg.learned.model and seq.format in ("tum", "folder"):
         summary["note"] = ("the shipped person detector is trained on simulator renders only; on a real camera's "
                            "images bring a detector trained on real ones (--detector)")
     if metrics is not None:
@@ -345,10 +376,15 @@ def _size(text: str) -> tuple[int, int]:
 
 def add_parser(sub) -> None:
     """The ``perceive`` command's options (registered by experiments.cli)."""
-    p = sub.add_parser("perceive", help="run DODT on a recorded RGB-D sequence (TUM format or a simulate "
-                                        "output); write tracks, timings, a summary and annotated images")
-    p.add_argument("sequence", help="a TUM RGB-D folder (rgb/, depth/, rgb.txt, depth.txt) or a `dodt-nav "
-                                    "simulate` output folder")
+    p = sub.add_parser("perceive", help="run DODT on a recorded RGB-D sequence (TUM format, a simulate "
+                                        "output or a folder of frames); write tracks, timings, a summary and "
+                                        "annotated images")
+    p.add_argument("sequence", help="a TUM RGB-D folder (rgb/, depth/, rgb.txt, depth.txt), a `dodt-nav simulate` "
+                                    "output folder, or a folder of frames (depth/ 16-bit PNGs, rgb/ or color/ images "
+                                    "of the same names; timestamps as file names, else give --rate). Colour must be "
+                                    "registered to depth: the same size, pixel (u, v) of both images seeing the same "
+                                    "point (e.g. a RealSense's colour aligned to depth); a colour image of another "
+                                    "size is not used")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--config", default="dodt", help="a DODT configuration (default dodt; see dodt.presets)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
@@ -359,7 +395,10 @@ def add_parser(sub) -> None:
     for k in ("fx", "fy", "cx", "cy"):
         p.add_argument(f"--{k}", type=float, default=None, help=f"the depth camera's {k} [px]")
     p.add_argument("--depth-factor", type=float, default=None,
-                   help="depth units per metre (default: the intrinsics file's, else 5000 as in TUM RGB-D)")
+                   help="depth units per metre (default: the intrinsics file's, else 5000 as in TUM RGB-D; "
+                        "millimetre images: 1000). With --fit-floor a camera height outside "
+                        f"{PLAUSIBLE_CAMERA_HEIGHT[0]:g}-{PLAUSIBLE_CAMERA_HEIGHT[1]:g} m is warned of: most likely a "
+                        "wrong depth factor")
     p.add_argument("--poses", default=None, metavar="FILE",
                    help="camera poses, lines 'timestamp tx ty tz qx qy qz qw' (default: the folder's groundtruth.txt)")
     p.add_argument("--fit-floor", action="store_true",
@@ -368,7 +407,10 @@ def add_parser(sub) -> None:
     p.add_argument("--camera-height", type=float, default=None, help="a fixed camera's height above the floor [m]")
     p.add_argument("--pitch", type=float, default=None, help="a fixed camera's tilt below the horizon [deg]")
     p.add_argument("--roll", type=float, default=0.0, help="a fixed camera's roll [deg] (default 0)")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="process the frames decimated to this rate")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="frames with per-frame timestamps (TUM's lists, timestamp file names, a simulate output) "
+                        "are decimated to this rate; a folder of frames without timestamps (depth/000123.png) was "
+                        "recorded at this rate, its stamps are frame number / HZ")
     p.add_argument("--max-frames", type=int, default=None, help="stop after this many frames")
     p.add_argument("--images", action="store_true", help="write annotated images into OUT/annotated/")
     p.add_argument("--video", action="store_true", help="write OUT/annotated.mp4")
@@ -389,11 +431,12 @@ def run_cli(args) -> int:
                  fit_floor=args.fit_floor, camera_height=args.camera_height, pitch=args.pitch, roll=args.roll,
                  rate=args.rate, max_frames=args.max_frames, images=args.images, video=args.video,
                  detector=args.detector, detector_layout=args.detector_layout, person_class=args.person_class,
-                 detector_input=_size(args.detector_input) if args.detector_input else None, progress=True)
+                 detector_input=_size(args.detector_input) if args.detector_input else None, progress=True,
+                 warn=lambda w: print(f"warning: {w}", file=sys.stderr, flush=True))
     skipped = ", ".join(f"{k} {v}" for k, v in s["skipped"].items()) or "none"
     print(f"{s['sequence']} ({s['format']}): {s['frames_read']} frames read, {s['frames_processed']} processed "
           f"(skipped: {skipped}; unreadable {s['sequence_counters']['unreadable']}, without a pose "
-          f"{s['sequence_counters']['no_pose']}), {s['frame_rate_hz']} Hz, poses: {s['poses']}")
+          f"{s['sequence_counters']['no_pose']}), {s['frame_rate_hz']} Hz (stamps: {s['stamps']}), poses: {s['poses']}")
     if s["floor_fit"]:
         f = s["floor_fit"]
         print(f"floor fit: camera {f['height_m']:.3f} m above the floor, pitch {f['pitch_deg']:.1f} deg, roll "

@@ -32,10 +32,14 @@ a pair counting only within ``match_distance`` (0.5 m).
 - speed of static tracks: the reported horizontal speed of every track labelled static, in every
   frame (``static_speed_p95``), and of every track, whatever its label, lying farther than
   ``still_distance`` (1 m) from every person (``still_speed_p95``): what a planner that reads every
-  obstacle's velocity gets from obstacles that do not move.
+  obstacle's velocity gets from obstacles that do not move;
+- track life (``TrackLife``, the same figures in the closed-loop summary, read from the episode log):
+  continuity, phantom-moving reports per minute, the largest reported speed, and identity switches
+  over every track, whatever its label.
 """
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from dataclasses import dataclass, field
 
@@ -48,6 +52,104 @@ from dodt.geometry import in_field_of_view
 # the median distance from the mean of an isotropic 2D Gaussian, in standard deviations per axis
 MEDIAN_PER_SIGMA = float(np.sqrt(2.0 * np.log(2.0)))
 RECALL_BINS = (0.5, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)  # m, camera distance
+
+
+def _match(tracks_xy: np.ndarray, people_xy: np.ndarray, gate: float) -> list[tuple[int, int]]:
+    """One-to-one (track, person) index pairs nearest overall (Hungarian assignment on the horizontal
+    distance between centres), a pair counting only within ``gate`` metres."""
+    if not len(tracks_xy) or not len(people_xy):
+        return []
+    cost = np.linalg.norm(tracks_xy[:, None] - people_xy[None], axis=2)
+    r, c = linear_sum_assignment(cost)
+    return [(i, j) for i, j in zip(r, c) if cost[i, j] <= gate]
+
+
+@dataclass
+class TrackLife:
+    """How well the tracks keep the people and how much motion they invent, frame by frame (``add``):
+
+    - continuity: of the frames in which a person is within ``reach`` (5 m) of the sensor, in view or
+      not, the share in which a track, whatever its label, is matched to the person (one-to-one,
+      nearest, within ``match_distance``); pooled over people, so each person weighs by the time
+      spent within reach. ``continuity_moving``: the share in which a track labelled dynamic lies
+      within ``match_distance`` of the person;
+    - phantom-moving reports: a track labelled dynamic farther than ``match_distance`` from every
+      person, counted once per stretch of frames in a row it stays so, per minute of frames
+      (``phantom_moving_s``: the track-seconds of such reports);
+    - the largest reported horizontal speed of any track, whatever its label;
+    - identity switches (``track_id_switches``): a person matched to another track id than the
+      last time it was matched (the matching of continuity).
+
+    The time is the sum of the gaps between consecutive frames, each at most ``max_gap`` seconds.
+    """
+
+    match_distance: float = 0.5  # m
+    reach: float = 5.0  # m
+    max_gap: float = 1.0  # s
+    last_id: dict = field(default_factory=dict)  # person id -> the track id last matched
+    person_frames: int = 0  # frames x people within reach
+    reported: int = 0  # of those, matched by a track
+    reported_moving: int = 0  # of those, with a dynamic track within match_distance
+    phantoms: set = field(default_factory=set)  # the track ids phantom-moving in the latest frame
+    track_id_switches: int = 0
+    phantom_reports: int = 0
+    phantom_s: float = 0.0  # track-seconds
+    last_t: float | None = None  # s, the latest frame's stamp
+    max_speed: float = 0.0  # m/s
+    seconds: float = 0.0
+
+    def add(self, stamp: float, sensor, tracks, people) -> None:
+        """One frame: ``sensor`` (3,) its position; ``tracks``: (id, centre (3,), velocity (3,), dynamic)
+        per reported track; ``people``: (id, centre (3,)) per person of the ground truth."""
+        dt = 0.0 if self.last_t is None else min(max(stamp - self.last_t, 0.0), self.max_gap)
+        self.last_t = stamp
+        self.seconds += dt
+        sensor = np.asarray(sensor, dtype=float)
+        t_xy = np.array([np.asarray(c, dtype=float)[:2] for _, c, _, _ in tracks]).reshape(-1, 2)
+        p_xyz = np.array([np.asarray(c, dtype=float)[:3] for _, c in people]).reshape(-1, 3)
+        for _, _, v, _ in tracks:
+            self.max_speed = max(self.max_speed, float(math.hypot(v[0], v[1])))
+        matched = {j: tracks[i][0] for i, j in _match(t_xy, p_xyz[:, :2], self.match_distance)}
+        for j, tid in matched.items():
+            pid = people[j][0]
+            if pid in self.last_id and self.last_id[pid] != tid:
+                self.track_id_switches += 1
+            self.last_id[pid] = tid
+        dyn = np.array([bool(d) for *_, d in tracks], dtype=bool)
+        dist = (np.linalg.norm(t_xy[:, None] - p_xyz[None, :, :2], axis=2) if len(people)
+                else np.full((len(tracks), 0), np.inf))
+        for j in range(len(people)):
+            if np.linalg.norm(p_xyz[j] - sensor) <= self.reach:
+                self.person_frames += 1
+                self.reported += j in matched
+                self.reported_moving += bool(np.any(dyn & (dist[:, j] <= self.match_distance)))
+        far = dist.min(axis=1) > self.match_distance if len(people) else np.ones(len(tracks), dtype=bool)
+        now = {tracks[i][0] for i in np.flatnonzero(dyn & far)}
+        self.phantom_reports += len(now - self.phantoms)
+        self.phantom_s += dt * len(now & self.phantoms)
+        self.phantoms = now
+
+    def summary(self) -> dict:
+        """The figures (None where nothing was counted)."""
+        minutes = self.seconds / 60.0
+        return {"continuity": self.reported / self.person_frames if self.person_frames else None,
+                "continuity_moving": self.reported_moving / self.person_frames if self.person_frames else None,
+                "continuity_frames": self.person_frames,
+                "phantom_moving_per_min": self.phantom_reports / minutes if minutes > 0 else None,
+                "phantom_moving": self.phantom_reports, "phantom_moving_s": round(self.phantom_s, 4),
+                "max_reported_speed": round(self.max_speed, 4), "track_id_switches": self.track_id_switches,
+                "track_life_s": round(self.seconds, 4)}
+
+    @staticmethod
+    def combine(parts: list["TrackLife"]) -> "TrackLife":
+        """The counts of several runs summed (the largest speed the largest)."""
+        m = TrackLife()
+        for p in parts:
+            for k in ("person_frames", "reported", "reported_moving", "track_id_switches", "phantom_reports",
+                      "phantom_s", "seconds"):
+                setattr(m, k, getattr(m, k) + getattr(p, k))
+            m.max_speed = max(m.max_speed, p.max_speed)
+        return m
 
 
 def bin_labels() -> list[str]:
@@ -84,6 +186,7 @@ class PerceptionMetrics:
     pred_cv: list = field(default_factory=list)  # m, constant-velocity prediction errors
     pred_ca: list = field(default_factory=list)  # m, constant-acceleration prediction errors
     pending: list = field(default_factory=list)  # (due stamp, person id, cv xy, ca xy), oldest first
+    life: TrackLife = field(default_factory=TrackLife)
 
     def _score_predictions(self, stamp: float, people: dict) -> None:
         """Scores the predictions due by ``stamp`` against ``people`` ({id: (2,) xy})."""
@@ -100,6 +203,9 @@ class PerceptionMetrics:
     def add(self, result, truth, K: CameraIntrinsics) -> None:
         self.frames += 1
         people = [o for o in truth.obstacles if o.kind == "person"]
+        self.life.add(float(truth.stamp), truth.T_world_camera[:3, 3],
+                      [(o.id, o.center, o.velocity, o.dynamic) for o in getattr(result, "obstacles", ())],
+                      [(p.id, p.center) for p in people])
         if self.pending:
             self._score_predictions(float(truth.stamp), {p.id: p.center[:2] for p in people})
         for o in getattr(result, "obstacles", ()):
@@ -191,7 +297,8 @@ class PerceptionMetrics:
                 "static_tracks": len(self.static_speeds),
                 "std_scale": (float(np.median(self.std_ratio)) / MEDIAN_PER_SIGMA if self.std_ratio
                               else float("nan")),
-                "pred_err_cv": mean(self.pred_cv), "pred_err_ca": mean(self.pred_ca), "predicted": len(self.pred_cv)}
+                "pred_err_cv": mean(self.pred_cv), "pred_err_ca": mean(self.pred_ca), "predicted": len(self.pred_cv),
+                **self.life.summary()}
 
     @staticmethod
     def combine(parts: list["PerceptionMetrics"]) -> dict:
@@ -212,6 +319,7 @@ class PerceptionMetrics:
                 setattr(m, k, getattr(m, k) + getattr(p, k))
             m.visible_by_bin = [a + b for a, b in zip(m.visible_by_bin, p.visible_by_bin)]
             m.recalled_by_bin = [a + b for a, b in zip(m.recalled_by_bin, p.recalled_by_bin)]
+        m.life = TrackLife.combine([p.life for p in parts])
         return m.summary()
 
 

@@ -11,6 +11,15 @@ Two layouts are read:
   between poses at most ``max_pose_gap`` (0.1 s) apart.
 - This project's ``dodt-nav simulate`` output: ``sensor.json`` with the intrinsics and each
   frame's stamp, pose and image paths (depth in millimetres).
+- A plain folder of frames: ``depth/`` 16-bit PNGs (at ``depth_factor`` units per metre, 5000 by
+  default as in TUM) and optionally ``rgb/`` (or ``color/``) PNG or JPEG images of the same names, no list
+  files. File names that are timestamps (a number with a decimal point, as TUM names its images)
+  are the frames' stamps; other names (``000123.png``) are taken in numerical order at a frame rate
+  the caller gives (``rate``, Hz: the sequence has no per-frame timestamps).
+
+In every layout the colour image must be registered to the depth image: the same size, and pixel
+(u, v) of both seeing the same point (a RealSense's colour aligned to depth, a Kinect's registered
+colour). A colour image of another size is not used (counted ``no_color``).
 
 Depth in whole millimetres (every value of a frame a multiple of depth_factor / 1000: a millimetre
 sensor's depth converted, as ``simulate --format tum`` writes it) is read as millimetres, so its
@@ -197,6 +206,9 @@ class Sequence:
     depth_scale: float  # metres per depth unit
     refs: list[FrameRef]
     pose_source: str | None  # the file the poses come from, or None
+    # where the stamps come from: "per-frame" (listed or named with each frame), or the frame rate
+    # the caller gave for a sequence without them
+    stamp_source: str = "per-frame"
     counters: dict = field(default_factory=lambda: {"unreadable": 0, "no_pose": 0, "no_color": 0})
 
     def frames(self, fixed_pose: np.ndarray | None = None, pose_transform: np.ndarray | None = None,
@@ -288,12 +300,15 @@ def _first_size(paths) -> tuple[int, int]:
 
 def open_sequence(path: str | Path, intrinsics_file: str | Path | None = None, fx=None, fy=None, cx=None,
                   cy=None, depth_factor: float | None = None, poses: str | Path | None = None,
-                  max_difference: float = 0.02, max_pose_gap: float = 0.1) -> Sequence:
-    """A TUM RGB-D folder or a ``dodt-nav simulate`` output folder, ready to be read.
+                  max_difference: float = 0.02, max_pose_gap: float = 0.1, rate: float | None = None) -> Sequence:
+    """A TUM RGB-D folder, a ``dodt-nav simulate`` output folder or a plain folder of frames, ready
+    to be read.
 
     ``poses``: a TUM trajectory file (relative to the folder or absolute; default: the folder's
     groundtruth.txt if there is one; "none": no poses). ``depth_factor``: depth units per metre
-    (default: the intrinsics file's, else 5000 for TUM)."""
+    (default: the intrinsics file's, else 5000 for TUM and a plain folder). ``rate``: the frame rate
+    (Hz) of a plain folder whose file names are no timestamps; a sequence with per-frame timestamps
+    keeps them."""
     root = Path(path)
     if not root.is_dir():
         raise SequenceError(f"{root}: no such sequence folder")
@@ -302,8 +317,10 @@ def open_sequence(path: str | Path, intrinsics_file: str | Path | None = None, f
         return _open_tum(root, intrinsics_file, opts, depth_factor, poses, max_difference, max_pose_gap)
     if (root / "sensor.json").is_file():
         return _open_sim(root, intrinsics_file, opts, depth_factor, poses, max_pose_gap)
-    raise SequenceError(f"{root}: neither a TUM RGB-D sequence (depth.txt) nor a dodt-nav simulate output "
-                        "(sensor.json)")
+    if (root / "depth").is_dir():
+        return _open_folder(root, intrinsics_file, opts, depth_factor, poses, max_pose_gap, rate)
+    raise SequenceError(f"{root}: neither a TUM RGB-D sequence (depth.txt), a dodt-nav simulate output "
+                        "(sensor.json) nor a folder of frames (depth/)")
 
 
 def _pose_track(root: Path, poses, max_pose_gap: float) -> tuple[PoseTrack | None, str | None]:
@@ -321,6 +338,60 @@ def _pose_track(root: Path, poses, max_pose_gap: float) -> tuple[PoseTrack | Non
     return PoseTrack(stamps, rows, max_pose_gap), str(p)
 
 
+def _depth_factor(depth_factor: float | None, values: dict) -> float:
+    """Depth units per metre: the option's, else the intrinsics file's, else TUM's 5000."""
+    factor = depth_factor if depth_factor is not None else values.get("depth_factor", TUM_DEPTH_FACTOR)
+    if not (math.isfinite(factor) and factor > 0):
+        raise SequenceError(f"--depth-factor: must be a number of depth units per metre above 0, got {factor}")
+    return factor
+
+
+def _stamp_of_name(stem: str) -> float | None:
+    """The timestamp a file name holds ("1305031102.175304"), or None (no decimal point, not a number)."""
+    if "." not in stem:
+        return None
+    try:
+        t = float(stem)
+    except ValueError:
+        return None
+    return t if math.isfinite(t) else None
+
+
+def _name_order(path: Path):
+    """Sort key: file names by the number they hold (frame 10 after frame 9), then by name."""
+    digits = "".join(c for c in path.stem if c.isdigit())
+    return (int(digits) if digits else -1, path.name)
+
+
+def _open_folder(root, intrinsics_file, opts, depth_factor, poses, max_pose_gap, rate) -> Sequence:
+    """A plain folder of frames (module docstring): depth/*.png, colour of the same names."""
+    depth = sorted((p for p in (root / "depth").iterdir() if p.suffix.lower() == ".png"), key=_name_order)
+    if not depth:
+        raise SequenceError(f"{root / 'depth'}: no PNG depth images")
+    named = [_stamp_of_name(p.stem) for p in depth]
+    if all(t is not None for t in named):
+        order = sorted(range(len(depth)), key=lambda i: named[i])
+        depth, stamps = [depth[i] for i in order], [named[i] for i in order]
+        if any(b <= a for a, b in zip(stamps, stamps[1:])):
+            raise SequenceError(f"{root / 'depth'}: two images are named with the same timestamp")
+        stamp_source = "per-frame"
+    elif rate is None:
+        raise SequenceError(f"{root}: its frames have no timestamps (file names such as {depth[0].name}): give the "
+                            "frame rate they were recorded at, --rate HZ")
+    else:
+        stamps = [k / rate for k in range(len(depth))]
+        stamp_source = f"--rate {rate:g} Hz"
+    color_dir = next((root / d for d in ("rgb", "color") if (root / d).is_dir()), None)
+    colors = {} if color_dir is None else {p.stem: p for p in sorted(color_dir.iterdir())
+                                           if p.suffix.lower() in (".png", ".jpg", ".jpeg")}
+    K, values = _intrinsics(root, opts, Path(intrinsics_file) if intrinsics_file else None, _first_size(depth[:20]))
+    track, pose_source = _pose_track(root, poses, max_pose_gap)
+    refs = []
+    for seq, (stamp, d) in enumerate(zip(stamps, depth)):
+        refs.append(FrameRef(seq, stamp, d, colors.get(d.stem), track.at(stamp) if track is not None else None))
+    return Sequence(root, "folder", K, 1.0 / _depth_factor(depth_factor, values), refs, pose_source, stamp_source)
+
+
 def _open_tum(root, intrinsics_file, opts, depth_factor, poses, max_difference, max_pose_gap) -> Sequence:
     depth_list = read_list(root / "depth.txt")
     if not depth_list:
@@ -328,9 +399,7 @@ def _open_tum(root, intrinsics_file, opts, depth_factor, poses, max_difference, 
     rgb_list = read_list(root / "rgb.txt") if (root / "rgb.txt").is_file() else []
     K, values = _intrinsics(root, opts, Path(intrinsics_file) if intrinsics_file else None,
                             _first_size([root / p for _, p in depth_list[:20]]))
-    factor = depth_factor if depth_factor is not None else values.get("depth_factor", TUM_DEPTH_FACTOR)
-    if not (math.isfinite(factor) and factor > 0):
-        raise SequenceError(f"--depth-factor: must be a number of depth units per metre above 0, got {factor}")
+    factor = _depth_factor(depth_factor, values)
     track, pose_source = _pose_track(root, poses, max_pose_gap)
     rgb_stamps = [s for s, _ in rgb_list]
     refs = []

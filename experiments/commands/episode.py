@@ -71,11 +71,16 @@ def add_perceive_parser(sub) -> None:
     add_perceive(sub)
     describe(
         sub.choices["perceive"],
-        "Run DODT alone, open loop, on a recorded RGB-D sequence: a TUM RGB-D folder (from a real camera) or "
-        "the output of `dodt-nav simulate`. Writes the tracked obstacles of every frame (OUT/tracks.jsonl), "
-        "per-stage timings (timings.csv) and a summary; with ground truth beside the sequence (a simulate "
-        "output), also position and velocity errors, false positives, recall and ID switches. Without "
-        "camera poses, a fixed camera is placed by --fit-floor or --camera-height and --pitch.",
+        "Run DODT alone, open loop, on a recorded RGB-D sequence: a TUM RGB-D folder (from a real camera), "
+        "the output of `dodt-nav simulate`, or a folder of depth (and colour) images. Writes the tracked "
+        "obstacles of every frame (OUT/tracks.jsonl), per-stage timings (timings.csv) and a summary; with "
+        "ground truth beside the sequence (a simulate output), also position and velocity errors, false "
+        "positives, recall and ID switches. Without camera poses, a fixed camera is placed by --fit-floor "
+        "(which warns of a camera height that points to a wrong --depth-factor) or --camera-height and --pitch. "
+        "The colour image must be registered (aligned) to the depth image: the same size, pixel (u, v) of "
+        "both seeing the same point, as a RealSense's colour aligned to depth or TUM RGB-D's registered "
+        "images; the person detector reads the depth under its colour boxes. Frames are timed by their "
+        "own timestamps; a folder of frames without timestamps needs --rate.",
         LazyText(lambda: examples(
             "dodt-nav perceive runs/sim --out runs/sim_tracks --images",
             "dodt-nav perceive rgbd_dataset_freiburg3_walking_xyz --out runs/tum --fit-floor --video",

@@ -82,21 +82,25 @@ def near(obstacles, xy, d=0.6):
 
 
 def check_scene(out: Path, summary: dict, xy_of=lambda x, y: (x, y)) -> None:
-    """The walker is dynamic in most frames once seen for a few, the furniture never, and static
-    tracks report no velocity."""
+    """The walker is dynamic in most frames once seen for a few, the furniture never; every track
+    reports its filter's velocity, no faster than a person (track.max_speed), and no track
+    labelled static moves more than 0.3 m between frames."""
     lines = tracks(out)
     assert len(lines) == summary["frames_read"] == FRAMES and summary["frames_processed"] == FRAMES
     walking = []
+    last_static = {}  # id -> centre of a track labelled static in the frame before
     for k, line in enumerate(lines):
+        for o in line["obstacles"]:
+            assert o["velocity"] == o["filter_velocity"] and math.hypot(*o["velocity"][:2]) <= 2.5 + 1e-3
+            if not o["dynamic"] and o["id"] in last_static:
+                assert math.dist(o["center"][:2], last_static[o["id"]]) <= 0.3, (k, o)
+        last_static = {o["id"]: o["center"][:2] for o in line["obstacles"] if not o["dynamic"]}
         assert line["skipped"] is None
         lo, hi = walker(k / RATE)
         w = near(line["obstacles"], xy_of((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2))
         walking.append(any(o["dynamic"] for o in w))
         for o in near(line["obstacles"], xy_of(2.7, 1.9), 0.4):
             assert not o["dynamic"], (k, o)
-        for o in line["obstacles"]:
-            if not o["dynamic"]:
-                assert o["velocity"] == [0.0, 0.0, 0.0]
     assert sum(walking[4:]) >= 0.8 * len(walking[4:]), walking
     assert summary["timings_ms"]["total"]["median"] > 0
     rows = list(open(out / "timings.csv"))
@@ -297,3 +301,64 @@ def test_a_simulate_output_in_its_own_format_is_read_too(tmp_path):
     saved = json.loads((tmp_path / "sim" / "summary.json").read_text())["frames_saved"]
     assert s["frames_processed"] == saved == s["metrics"]["frames"]
     assert s["depth_scale_m"] == 0.001 and s["sequence_counters"]["unreadable"] == 0
+
+
+def make_folder(root: Path, stamps_as_names: bool, frames: int = FRAMES) -> Path:
+    """The tiny scene as a plain folder of frames: depth/ and rgb/ PNGs of the same names (timestamps,
+    or frame numbers without zero padding), intrinsics.json, no list files."""
+    (root / "depth").mkdir(parents=True)
+    (root / "rgb").mkdir()
+    T = camera_pose(HEIGHT, PITCH)
+    for k in range(frames):
+        name = f"{1305031102.0 + k / RATE:.6f}.png" if stamps_as_names else f"{k}.png"
+        d = render_depth(K, T, [FURNITURE, walker(k / RATE)])
+        units = np.round(d.astype(np.float64) * 5000)
+        cv2.imwrite(str(root / "depth" / name), np.where(units <= 65535, units, 0).astype(np.uint16))
+        cv2.imwrite(str(root / "rgb" / name), np.full((K.height, K.width, 3), 90, np.uint8))
+    (root / "intrinsics.json").write_text(json.dumps({"fx": K.fx, "fy": K.fy, "cx": K.cx, "cy": K.cy}))
+    return root
+
+
+def test_a_folder_of_frames_without_timestamps_needs_the_rate(tmp_path):
+    """Frames named 0.png .. 23.png: refused without --rate; with it, stamped frame / rate in numerical
+    order (10.png after 9.png), which the walker's track shows."""
+    seq = make_folder(tmp_path / "seq", stamps_as_names=False)
+    with pytest.raises(SequenceError, match=r"no timestamps \(file names such as 0.png\): give .* --rate HZ"):
+        perceive(seq, tmp_path / "x", camera_height=HEIGHT, pitch=PITCH)
+    s = perceive(seq, tmp_path / "out", camera_height=HEIGHT, pitch=PITCH, rate=RATE)
+    assert s["format"] == "folder" and s["stamps"] == "--rate 10 Hz"
+    assert s["frame_rate_hz"] == pytest.approx(RATE) and s["sequence_counters"]["no_color"] == 0
+    assert [line["stamp"] for line in tracks(tmp_path / "out")] == pytest.approx([k / RATE for k in range(FRAMES)])
+    check_scene(tmp_path / "out", s)
+
+
+def test_a_folder_of_frames_named_by_timestamp_keeps_them(tmp_path):
+    """Frames named by their timestamps are timed by them; --rate then decimates."""
+    seq = make_folder(tmp_path / "seq", stamps_as_names=True)
+    s = perceive(seq, tmp_path / "out", camera_height=HEIGHT, pitch=PITCH)
+    assert s["stamps"] == "per-frame" and s["frame_rate_hz"] == pytest.approx(RATE)
+    assert tracks(tmp_path / "out")[1]["stamp"] == pytest.approx(1305031102.1)
+    check_scene(tmp_path / "out", s)
+    s = perceive(seq, tmp_path / "out2", camera_height=HEIGHT, pitch=PITCH, rate=5.0)
+    assert s["frames_read"] == FRAMES // 2 and s["frame_rate_hz"] == pytest.approx(5.0)
+
+
+def test_a_wrong_depth_scale_is_warned_of(tmp_path, capsys):
+    """Millimetre depth images read at TUM's 5000 units per metre: the floor fit puts the camera 0.4 m
+    up, which is warned of in one line on stderr and in the summary, naming --depth-factor 1000;
+    read at 1000, no warning."""
+    seq = make_folder(tmp_path / "seq", stamps_as_names=True, frames=4)
+    for png in (seq / "depth").iterdir():  # the same scene in millimetres
+        units = cv2.imread(str(png), cv2.IMREAD_UNCHANGED).astype(np.float64)
+        cv2.imwrite(str(png), np.round(units / 5).astype(np.uint16))
+    s = perceive(seq, tmp_path / "wrong", fit_floor=True)
+    assert s["floor_fit"]["height_m"] == pytest.approx(HEIGHT / 5, abs=0.02)
+    assert len(s["warnings"]) == 1
+    assert "camera 0.40 m above the floor" in s["warnings"][0]
+    assert "--depth-factor 1000 would put it 2.00 m up" in s["warnings"][0]
+    s = perceive(seq, tmp_path / "right", fit_floor=True, depth_factor=1000.0)
+    assert s["floor_fit"]["height_m"] == pytest.approx(HEIGHT, abs=0.02) and s["warnings"] == []
+    capsys.readouterr()
+    assert main(["perceive", str(seq), "--out", str(tmp_path / "cli"), "--fit-floor"]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1 and "--depth-factor 1000" in warnings[0]
