@@ -187,11 +187,17 @@ def _replace(obj, tree: dict, check: Check | None):
 # ---------------------------------------------------------------- reading
 
 def parse_value(text: str):
-    """A ``--set`` value: a TOML literal, or the text itself when it is none (a bare word)."""
+    """A ``--set`` value: a TOML literal, or the text itself when it is none (a bare word). One line only:
+    a newline would let the text carry further TOML keys, which would be dropped unseen."""
+    if any(c in text for c in "\n\r\x00"):
+        raise ConfigError(f"--set value {text[:40]!r}: holds a line break or a NUL; give one value per --set")
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        data = tomllib.loads(f"v = {text}")
     except tomllib.TOMLDecodeError:
         return text.strip()
+    except ValueError as e:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise ConfigError(f"--set value {text[:40]!r}...: {e}") from None
+    return data["v"]
 
 
 def _flatten(table: dict, prefix: str = "") -> list[tuple[str, Any]]:
@@ -228,6 +234,8 @@ def _depth(v, limit: int, depth: int = 0) -> int:
 def read_file(path: str | Path) -> list[tuple[str, Any]]:
     """The (dotted key, value) pairs of a TOML configuration file (at most MAX_CONFIG_BYTES, UTF-8, tables
     at most MAX_KEY_DEPTH deep); a ConfigError naming the file when it cannot be used."""
+    if not str(path):
+        raise ConfigError("--config: an empty file name")
     p = Path(path)
     try:
         if not p.exists():
@@ -253,6 +261,8 @@ def read_file(path: str | Path) -> list[tuple[str, Any]]:
         raise ConfigError(f"--config: {path}: not valid TOML ({e})") from None
     except RecursionError:
         raise ConfigError(f"--config: {path}: nested too deep") from None
+    except ValueError as e:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise ConfigError(f"--config: {path}: {e}") from None
     if _depth(data, MAX_KEY_DEPTH) > MAX_KEY_DEPTH:
         raise ConfigError(f"--config: {path}: tables or lists nested more than {MAX_KEY_DEPTH} deep")
     return _flatten(data)
@@ -272,7 +282,7 @@ def build(sections: Mapping[str, Any], config_file: str | Path | None = None, se
     checked now against its section's default configuration in ``sections`` (name -> dataclass instance)
     and by ``check``: a ConfigError naming the key (and the file, for a key the file set). ``absent``: why
     a known section is not available in this run (name -> reason), for its error message."""
-    pairs = [(k, v, config_file) for k, v in read_file(config_file)] if config_file else []
+    pairs = [(k, v, config_file) for k, v in read_file(config_file)] if config_file is not None else []
     pairs += [(*parse_set(s), None) for s in sets]
     by_section: dict[str, dict[str, Any]] = {s: {} for s in sections}
     origin: dict[str, Any] = {}
