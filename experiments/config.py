@@ -231,30 +231,46 @@ def _depth(v, limit: int, depth: int = 0) -> int:
     return max((_depth(c, limit, depth + 1) for c in children), default=depth)
 
 
+class TextFileError(ValueError):
+    """A text file that cannot be used; the message starts with its path."""
+
+
+def read_text(path: str | Path, limit: int, kind: str) -> str:
+    """The text of a small UTF-8 file, read no further than ``limit`` bytes (a device such as /dev/zero never
+    ends); TextFileError naming the file when it is missing, not a regular file, larger, or not UTF-8.
+    ``kind`` names what the file should be, for the messages."""
+    p = Path(path)
+    try:
+        if not p.exists():
+            raise TextFileError(f"no such file {str(path)!r}")
+        if p.is_dir():
+            raise TextFileError(f"{path} is a folder, not {kind}")
+        if not p.is_file():
+            raise TextFileError(f"{path} is not a regular file")
+        with open(p, "rb") as fh:
+            raw = fh.read(limit + 1)
+    except OSError as e:
+        raise TextFileError(f"cannot read {path}: {e.strerror or e}") from None
+    if len(raw) > limit:
+        raise TextFileError(f"{path}: larger than {limit / (1 << 20):g} MiB; not {kind}")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise TextFileError(f"{path}: not a UTF-8 text file (byte 0x{raw[e.start]:02x} at offset {e.start})") from None
+    if "\x00" in text:
+        raise TextFileError(f"{path}: holds NUL bytes; not {kind}")
+    return text
+
+
 def read_file(path: str | Path) -> list[tuple[str, Any]]:
     """The (dotted key, value) pairs of a TOML configuration file (at most MAX_CONFIG_BYTES, UTF-8, tables
     at most MAX_KEY_DEPTH deep); a ConfigError naming the file when it cannot be used."""
     if not str(path):
         raise ConfigError("--config: an empty file name")
-    p = Path(path)
     try:
-        if not p.exists():
-            raise ConfigError(f"--config: no such file {str(path)!r}")
-        if p.is_dir():
-            raise ConfigError(f"--config: {path} is a folder, not a TOML file")
-        if not p.is_file():
-            raise ConfigError(f"--config: {path} is not a regular file")
-        with open(p, "rb") as fh:
-            raw = fh.read(MAX_CONFIG_BYTES + 1)
-    except OSError as e:
-        raise ConfigError(f"--config: cannot read {path}: {e.strerror or e}") from None
-    if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError(f"--config: {path}: larger than {MAX_CONFIG_BYTES >> 20} MiB; not a configuration file")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"--config: {path}: not a UTF-8 text file (byte 0x{raw[e.start]:02x} at offset "
-                          f"{e.start})") from None
+        text = read_text(path, MAX_CONFIG_BYTES, "a configuration file")
+    except TextFileError as e:
+        raise ConfigError(f"--config: {e}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -169,7 +169,7 @@ def _config_files() -> list[tuple[str, bytes | str, str]]:
         ("utf-16", ok.encode("utf-16"), "not a UTF-8 text file"),
         ("latin-1", "# caf\u00e9\n".encode("latin-1") + ok.encode(), "not a UTF-8 text file"),
         ("binary", bytes(range(256)) * 8, "not"),
-        ("NUL", ok.encode() + b"\x00", "not valid TOML"),
+        ("NUL", ok.encode() + b"\x00", "NUL"),
         ("deep tables", "[" + ".".join(["a"] * 50) + "]\nx = 1\n", "nested"),
         ("deep arrays", "x = " + "[" * 100000 + "]" * 100000 + "\n", "nested"),
         ("deep inline", "x = " + "{a = " * 3000 + "1" + "}" * 3000 + "\n", "nested"),
@@ -216,7 +216,7 @@ def test_a_bad_config_file_is_one_line_naming_it(case, cmd, tmp_path, capsys, no
 def test_a_config_path_that_is_no_file_is_one_line(case, cmd, tmp_path, capsys, no_work):
     _, path, name = case
     path = path.replace("TMP", str(tmp_path)).replace("NOWHERE", str(tmp_path / "nowhere"))
-    if path.startswith("/") and not __import__("os").path.exists(path):
+    if path.startswith(("/dev", "/proc")) and not __import__("os").path.exists(path):
         pytest.skip(f"no {path} here")
     code, err, _ = cli(COMMANDS[cmd](str(tmp_path / "out")) + ["--config", path], capsys)
     assert_refused(code, err, name, status=2)
