@@ -38,7 +38,6 @@ from dodt.floor import camera_pose, fit_floor_frames
 from dodt.pipeline import DODT, MODULES
 from dodt.presets import PRESETS, preset
 from dodt.protocol import TrackReport
-from experiments.commands.common import output_folder, real, whole
 from experiments.config_limits import check_config
 from experiments.sequences import MAX_DEPTH_FACTOR, MAX_FOCAL, MAX_SIDE, SequenceError, open_sequence
 
@@ -353,8 +352,10 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def add_parser(sub) -> None:
-    """The ``perceive`` command's options (registered by experiments.cli)."""
+def add_parser(sub, real, whole, output_folder) -> None:
+    """The ``perceive`` command's options (registered by experiments.commands.episode, which passes the
+    command line's checked number types ``real`` and ``whole`` and its ``output_folder`` check: this module
+    does not import the commands, which import it)."""
     p = sub.add_parser("perceive", help="run DODT on a recorded RGB-D sequence (TUM format or a simulate "
                                         "output); write tracks, timings, a summary and annotated images")
     p.add_argument("sequence", help="a TUM RGB-D folder (rgb/, depth/, rgb.txt, depth.txt) or a `dodt-nav "
@@ -393,11 +394,11 @@ def add_parser(sub) -> None:
     p.add_argument("--person-class", type=whole(0, 100_000), default=0, help="the detector's person class (COCO: 0)")
     p.add_argument("--detector-input", default=None, metavar="WxH",
                    help="the detector's input size, for a model whose input size is not fixed")
-    p.set_defaults(func=run_cli)
+    p.set_defaults(func=run_cli, output_folder=output_folder)
 
 
 def run_cli(args) -> int:
-    output_folder(args.out)  # refused before the sequence is read
+    args.output_folder(args.out)  # refused before the sequence is read
     s = perceive(args.sequence, args.out, config=args.config, assignments=args.set, intrinsics=args.intrinsics,
                  fx=args.fx, fy=args.fy, cx=args.cx, cy=args.cy, depth_factor=args.depth_factor, poses=args.poses,
                  fit_floor=args.fit_floor, camera_height=args.camera_height, pitch=args.pitch, roll=args.roll,
