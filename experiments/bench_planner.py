@@ -17,13 +17,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from dodt.context import EpisodeContext, reset_with_context
+from dodt.context import CameraSensor, EpisodeContext, Rates, VehicleLimits, reset_with_context
+from dodt.frames import CameraIntrinsics
 from experiments.episode import run_episode
 from experiments.episode_config import EpisodeConfig
 from experiments.guards import planner_telemetry
 from experiments.registry import DEFAULT_PLANNER, make_planner
 from planner.map.voxel_map import VoxelMap
-from planner.types import PlannerInput, Trajectory
+from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 from sim.vehicle import load_vehicle
 
 
@@ -115,4 +116,57 @@ def run(scenario: str = "corridor", seeds=(0, 1), perception: str = "dodt", repe
     print(f"planner replay, {scenario} seeds {','.join(map(str, seeds))}, perception {perception}: {n // repeats} "
           f"plans x {repeats} replays; per plan median {stats['median_ms']:.2f} ms, p95 {stats['p95_ms']:.2f} ms, "
           f"p99 {stats['p99_ms']:.2f} ms (medians over the replays); replayed plans equal to the loop's: {same}/{n}")
+    return out
+
+
+# --------------------------------------------------------------------------- time against people in range
+
+_FLU_TO_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # body -> camera optical
+
+
+def _corridor_context(length: float = 15.0, width: float = 4.0) -> EpisodeContext:
+    """An episode context of the default drone (its URDF's limits) with one forward camera in an empty
+    corridor, for planning without an episode."""
+    T = np.eye(4)
+    T[:3, :3] = _FLU_TO_OPTICAL
+    T[:3, 3] = (0.065, 0.01, 0.12)
+    return EpisodeContext(
+        scenario="people", seed=0, duration=60.0, vehicle=VehicleLimits.from_thrust(0.3, (0.4, 0.4, 0.15), 1.0, 2.0),
+        sensors=(CameraSensor("front", CameraIntrinsics(), T, rate=30.0, max_depth=10.0),),
+        rates=Rates(control=120.0, plan=10.0, map=15.0), start=np.array([0.5, 0.0, 1.2]),
+        goal=np.array([length - 0.5, 0.0, 1.2]), geofence=(np.array([0.0, -width / 2]), np.array([length, width / 2])))
+
+
+def people_scaling(counts=(10, 50, 200), plans: int = 20, seed: int = 0, radius: float = 6.0) -> dict:
+    """Milliseconds per plan of the default planner (shield, maneuvers and MPC) against the number of people
+    in range: each plan sees ``n`` people (0.5 x 0.5 x 1.8 m, walking 0.5-1.5 m/s in random directions) placed
+    uniformly within ``radius`` m of the drone, which flies down the corridor at 1 m/s over a known-free
+    static map (so the shield checks every plan). The first plan of each
+    count (warm-up) is left out of the median and p95."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for n in counts:
+        planner = make_planner(DEFAULT_PLANNER, 0.2)
+        reset_with_context(planner, _corridor_context())
+        free = VoxelMap()  # an empty static map, known free: the shield checks every plan against the people
+        free.set_known(np.zeros(free.log_odds.shape, dtype=bool))
+        ms = []
+        for k in range(plans + 1):
+            p = np.array([0.5 + 0.1 * k, 0.0, 1.2])
+            r, a = radius * np.sqrt(rng.uniform(0.04, 1.0, n)), rng.uniform(0, 2 * np.pi, n)
+            h, s = rng.uniform(0, 2 * np.pi, n), rng.uniform(0.5, 1.5, n)
+            obs = tuple(ObstaclePrediction(id=i, center=np.array([p[0] + r[i] * np.cos(a[i]), p[1] + r[i] * np.sin(a[i]),
+                                                                  0.9]),
+                                           size=np.array([0.5, 0.5, 1.8]),
+                                           velocity=s[i] * np.array([np.cos(h[i]), np.sin(h[i]), 0.0]))
+                        for i in range(n))
+            inp = PlannerInput(stamp=0.1 * k, position=p, velocity=np.array([1.0, 0.0, 0.0]), acceleration=np.zeros(3),
+                               goal=np.array([14.5, 0.0, 1.2]), obstacles=obs, yaw=0.0, occupancy=free)
+            t = time.perf_counter()
+            planner.plan(inp)
+            ms.append((time.perf_counter() - t) * 1e3)
+        ms = np.array(ms[1:])
+        out[n] = {"median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)), "plans": plans}
+        print(f"planner with {n} people within {radius:g} m: {out[n]['median_ms']:.1f} ms per plan median, "
+              f"{out[n]['p95_ms']:.1f} ms p95 ({plans} plans)")
     return out

@@ -187,11 +187,17 @@ def _replace(obj, tree: dict, check: Check | None):
 # ---------------------------------------------------------------- reading
 
 def parse_value(text: str):
-    """A ``--set`` value: a TOML literal, or the text itself when it is none (a bare word)."""
+    """A ``--set`` value: a TOML literal, or the text itself when it is none (a bare word). One line only:
+    a newline would let the text carry further TOML keys, which would be dropped unseen."""
+    if any(c in text for c in "\n\r\x00"):
+        raise ConfigError(f"--set value {text[:40]!r}: holds a line break or a NUL; give one value per --set")
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        data = tomllib.loads(f"v = {text}")
     except tomllib.TOMLDecodeError:
         return text.strip()
+    except ValueError as e:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise ConfigError(f"--set value {text[:40]!r}...: {e}") from None
+    return data["v"]
 
 
 def _flatten(table: dict, prefix: str = "") -> list[tuple[str, Any]]:
@@ -225,34 +231,54 @@ def _depth(v, limit: int, depth: int = 0) -> int:
     return max((_depth(c, limit, depth + 1) for c in children), default=depth)
 
 
-def read_file(path: str | Path) -> list[tuple[str, Any]]:
-    """The (dotted key, value) pairs of a TOML configuration file (at most MAX_CONFIG_BYTES, UTF-8, tables
-    at most MAX_KEY_DEPTH deep); a ConfigError naming the file when it cannot be used."""
+class TextFileError(ValueError):
+    """A text file that cannot be used; the message starts with its path."""
+
+
+def read_text(path: str | Path, limit: int, kind: str) -> str:
+    """The text of a small UTF-8 file, read no further than ``limit`` bytes (a device such as /dev/zero never
+    ends); TextFileError naming the file when it is missing, not a regular file, larger, or not UTF-8.
+    ``kind`` names what the file should be, for the messages."""
     p = Path(path)
     try:
         if not p.exists():
-            raise ConfigError(f"--config: no such file {str(path)!r}")
+            raise TextFileError(f"no such file {str(path)!r}")
         if p.is_dir():
-            raise ConfigError(f"--config: {path} is a folder, not a TOML file")
+            raise TextFileError(f"{path} is a folder, not {kind}")
         if not p.is_file():
-            raise ConfigError(f"--config: {path} is not a regular file")
+            raise TextFileError(f"{path} is not a regular file")
         with open(p, "rb") as fh:
-            raw = fh.read(MAX_CONFIG_BYTES + 1)
+            raw = fh.read(limit + 1)
     except OSError as e:
-        raise ConfigError(f"--config: cannot read {path}: {e.strerror or e}") from None
-    if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError(f"--config: {path}: larger than {MAX_CONFIG_BYTES >> 20} MiB; not a configuration file")
+        raise TextFileError(f"cannot read {path}: {e.strerror or e}") from None
+    if len(raw) > limit:
+        raise TextFileError(f"{path}: larger than {limit / (1 << 20):g} MiB; not {kind}")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise ConfigError(f"--config: {path}: not a UTF-8 text file (byte 0x{raw[e.start]:02x} at offset "
-                          f"{e.start})") from None
+        raise TextFileError(f"{path}: not a UTF-8 text file (byte 0x{raw[e.start]:02x} at offset {e.start})") from None
+    if "\x00" in text:
+        raise TextFileError(f"{path}: holds NUL bytes; not {kind}")
+    return text
+
+
+def read_file(path: str | Path) -> list[tuple[str, Any]]:
+    """The (dotted key, value) pairs of a TOML configuration file (at most MAX_CONFIG_BYTES, UTF-8, tables
+    at most MAX_KEY_DEPTH deep); a ConfigError naming the file when it cannot be used."""
+    if not str(path):
+        raise ConfigError("--config: an empty file name")
+    try:
+        text = read_text(path, MAX_CONFIG_BYTES, "a configuration file")
+    except TextFileError as e:
+        raise ConfigError(f"--config: {e}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"--config: {path}: not valid TOML ({e})") from None
     except RecursionError:
         raise ConfigError(f"--config: {path}: nested too deep") from None
+    except ValueError as e:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise ConfigError(f"--config: {path}: {e}") from None
     if _depth(data, MAX_KEY_DEPTH) > MAX_KEY_DEPTH:
         raise ConfigError(f"--config: {path}: tables or lists nested more than {MAX_KEY_DEPTH} deep")
     return _flatten(data)
@@ -272,7 +298,7 @@ def build(sections: Mapping[str, Any], config_file: str | Path | None = None, se
     checked now against its section's default configuration in ``sections`` (name -> dataclass instance)
     and by ``check``: a ConfigError naming the key (and the file, for a key the file set). ``absent``: why
     a known section is not available in this run (name -> reason), for its error message."""
-    pairs = [(k, v, config_file) for k, v in read_file(config_file)] if config_file else []
+    pairs = [(k, v, config_file) for k, v in read_file(config_file)] if config_file is not None else []
     pairs += [(*parse_set(s), None) for s in sets]
     by_section: dict[str, dict[str, Any]] = {s: {} for s in sections}
     origin: dict[str, Any] = {}

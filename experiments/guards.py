@@ -12,6 +12,7 @@ does (raise, return the wrong thing) stops an episode or goes unreported.
 """
 from __future__ import annotations
 
+import json
 import math
 import sys
 import traceback
@@ -25,6 +26,8 @@ from planner.fallback import brake_and_hold
 from planner.types import ObstaclePrediction, PlannerInput, Trajectory
 
 DEFAULT_BRAKE_ACCEL = 2.0  # m/s^2: the brake-and-hold's deceleration for a planner that states none
+MAX_TRAJECTORY_STEPS = 100_000  # steps of one plan: more is a runaway plan, refused before it is copied
+MAX_OBSTACLES = 10_000  # obstacles or tracks of one perception output (a crowd is some hundreds)
 
 
 class BadOutput(ValueError):
@@ -62,7 +65,7 @@ def _error_text(e: BaseException) -> str:
 def _finite_array(a, shape_ok, what: str) -> np.ndarray:
     try:
         x = np.asarray(a, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise BadOutput(f"{what}: not an array of numbers ({type(a).__name__})") from None
     if not shape_ok(x.shape):
         raise BadOutput(f"{what}: wrong shape {x.shape}")
@@ -72,9 +75,39 @@ def _finite_array(a, shape_ok, what: str) -> np.ndarray:
 
 
 def _finite_number(v, what: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
-        raise BadOutput(f"{what}: expected a finite number, got {v!r}")
-    return float(v)
+    ok = not isinstance(v, bool) and isinstance(v, (int, float, np.floating, np.integer))
+    try:
+        x = float(v) if ok else math.nan
+    except OverflowError:  # an int beyond any float
+        x = math.nan
+    if not math.isfinite(x):
+        raise BadOutput(f"{what}: expected a finite number, got {v!r}"[:300])
+    return x
+
+
+def _whole_number(v, what: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not -2**63 <= v < 2**63:
+        raise BadOutput(f"{what}: expected a whole number, got {v!r}"[:300])
+    return int(v)
+
+
+def _check_track(tr: TrackReport, what: str) -> None:
+    """A track the log can write: an integer id, finite (3,) vectors, flags that are booleans."""
+    _whole_number(tr.id, f"{what}.id")
+    for name in ("center", "size", "velocity"):
+        _finite_array(getattr(tr, name), lambda s: s == (3,), f"{what}.{name} (3,)")
+    for name in ("acceleration", "filter_velocity"):
+        if getattr(tr, name) is not None:
+            _finite_array(getattr(tr, name), lambda s: s == (3,), f"{what}.{name} (3,)")
+    for name in ("dynamic", "coasting") + (("is_person",) if tr.is_person is not None else ()):
+        if not isinstance(getattr(tr, name), (bool, np.bool_)):
+            raise BadOutput(f"{what}.{name}: expected true or false, got {getattr(tr, name)!r}"[:300])
+    if tr.age is not None:
+        _finite_number(tr.age, f"{what}.age")
+    try:
+        json.dumps(tr.to_json(), allow_nan=False)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise BadOutput(f"{what}: cannot be written to the log ({type(e).__name__}: {e})"[:300]) from None
 
 
 def check_trajectory(traj) -> Trajectory:
@@ -84,7 +117,8 @@ def check_trajectory(traj) -> Trajectory:
     _finite_number(traj.t0, "Trajectory.t0")
     if not _finite_number(traj.dt, "Trajectory.dt") > 0.0:
         raise BadOutput(f"Trajectory.dt: expected seconds > 0, got {traj.dt!r}")
-    a = _finite_array(traj.accelerations, lambda s: len(s) == 2 and s[1] == 3, "Trajectory.accelerations (N, 3)")
+    a = _finite_array(traj.accelerations, lambda s: len(s) == 2 and s[1] == 3 and 1 <= s[0] <= MAX_TRAJECTORY_STEPS,
+                      f"Trajectory.accelerations (N, 3) with 1 <= N <= {MAX_TRAJECTORY_STEPS}")
     n = a.shape[0]
     _finite_array(traj.positions, lambda s: s == (n + 1, 3), f"Trajectory.positions (N+1, 3) with N = {n}")
     _finite_array(traj.velocities, lambda s: s == (n + 1, 3), f"Trajectory.velocities (N+1, 3) with N = {n}")
@@ -144,7 +178,8 @@ def _floats(a) -> np.ndarray | None:
 
 def _guarded(call, errors: ModuleErrors, stamp: float):
     """(``call()``, None), or (None, what went wrong) with the failure counted in ``errors``. A module's
-    ``sys.exit`` is a failure like any other; only a keyboard interrupt goes through."""
+    ``sys.exit`` (or any other exception outside the Exception family) is a failure like any other; only a
+    keyboard interrupt goes through."""
     try:
         return call(), None
     except KeyboardInterrupt:
@@ -152,7 +187,7 @@ def _guarded(call, errors: ModuleErrors, stamp: float):
     except BadOutput as e:
         errors.add(stamp, "bad output", f"{e}\n")
         return None, "bad-output"
-    except (Exception, SystemExit) as e:  # noqa: BLE001 - a module's failure: the loop goes on without it
+    except BaseException as e:  # noqa: BLE001 - a module's failure: the loop goes on without it
         errors.add(stamp, type(e).__name__, _error_text(e))
         return None, type(e).__name__
 
@@ -182,12 +217,17 @@ def check_output(out) -> PerceptionOutput:
     if not isinstance(out, PerceptionOutput):
         raise BadOutput(f"update() returned {type(out).__name__}, not a dodt.protocol.PerceptionOutput")
     _finite_number(out.stamp, "PerceptionOutput.stamp")
+    for name in ("obstacles", "clear_boxes", "tracks"):
+        seq = getattr(out, name)
+        if isinstance(seq, (tuple, list)) and len(seq) > MAX_OBSTACLES:
+            raise BadOutput(f"PerceptionOutput.{name}: {len(seq)} entries, more than {MAX_OBSTACLES}")
     if not isinstance(out.obstacles, (tuple, list)):
         raise BadOutput(f"PerceptionOutput.obstacles: expected a tuple, got {type(out.obstacles).__name__}")
     for i, o in enumerate(out.obstacles):
         if not isinstance(o, ObstaclePrediction):
             raise BadOutput(f"PerceptionOutput.obstacles[{i}]: {type(o).__name__}, not a "
                             f"planner.types.ObstaclePrediction")
+        _whole_number(o.id, f"PerceptionOutput.obstacles[{i}].id")
         for name in ("center", "size", "velocity", "acceleration"):
             _finite_array(getattr(o, name), lambda s: s == (3,), f"PerceptionOutput.obstacles[{i}].{name} (3,)")
         for name in ("position_std", "std_growth", "accel_horizon", "max_speed"):
@@ -210,8 +250,14 @@ def check_output(out) -> PerceptionOutput:
             raise BadOutput(f"PerceptionOutput.tracks[{i}]: {type(tr).__name__}, not a TrackReport")
         try:
             tracks.append(TrackReport.from_json(tr))
-        except (KeyError, TypeError, ValueError) as e:
+        except (KeyError, TypeError, ValueError, OverflowError) as e:
             raise BadOutput(f"PerceptionOutput.tracks[{i}]: not a track ({type(e).__name__}: {e})") from None
+    for i, tr in enumerate(tracks):
+        _check_track(tr, f"PerceptionOutput.tracks[{i}]")
+    if not isinstance(out.timings_ms, dict) or not all(
+            isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for k, v in out.timings_ms.items()):
+        raise BadOutput("PerceptionOutput.timings_ms: expected {stage name: finite milliseconds}")
     if out.skipped is not None and not isinstance(out.skipped, str):
         raise BadOutput(f"PerceptionOutput.skipped: expected a reason (text) or None, got {out.skipped!r}")
     return out if all(a is b for a, b in zip(tracks, out.tracks)) else replace(out, tracks=tuple(tracks))

@@ -42,7 +42,8 @@ from dodt.floor import camera_pose, fit_floor_frames
 from dodt.pipeline import DODT, MODULES
 from dodt.presets import PRESETS, preset
 from dodt.protocol import TrackReport
-from experiments.sequences import SequenceError, open_sequence
+from experiments.config_limits import check_config
+from experiments.sequences import MAX_DEPTH_FACTOR, MAX_FOCAL, MAX_SIDE, SequenceError, open_sequence
 
 FLOOR_FRAMES = 10  # the first readable frames the floor is fitted on
 # m: the heights above the floor a camera plausibly has (a drone's, a handheld's, a mounted one's).
@@ -81,9 +82,15 @@ def build_config(name: str, assignments=(), detector: str | None = None, layout:
         if input_size is not None:
             cfg = override(cfg, [f"learned.input_size={input_size[0]},{input_size[1]}"])
     try:
-        return override(cfg, assignments)
+        cfg = override(cfg, assignments)
     except ValueError as e:
         raise SequenceError(str(e)) from None
+    if assignments:
+        try:
+            check_config("dodt", cfg)  # every value in its range (experiments.config_limits), as run's --set dodt.*
+        except ValueError as e:
+            raise SequenceError(f"--set: {e}") from None
+    return cfg
 
 
 def _floor_pose(seq, sensor_poses: bool) -> tuple[np.ndarray | None, np.ndarray | None, dict]:
@@ -371,11 +378,15 @@ def _size(text: str) -> tuple[int, int]:
         w, h = (int(v) for v in text.lower().replace("x", ",").split(","))
     except ValueError:
         raise SequenceError(f"--detector-input: expected WIDTHxHEIGHT, got {text!r}") from None
+    if not (1 <= w <= MAX_SIDE and 1 <= h <= MAX_SIDE):
+        raise SequenceError(f"--detector-input: each side must be 1 to {MAX_SIDE} pixels, got {text!r}")
     return w, h
 
 
-def add_parser(sub) -> None:
-    """The ``perceive`` command's options (registered by experiments.cli)."""
+def add_parser(sub, real, whole, output_folder) -> None:
+    """The ``perceive`` command's options (registered by experiments.commands.episode, which passes the
+    command line's checked number types ``real`` and ``whole`` and its ``output_folder`` check: this module
+    does not import the commands, which import it)."""
     p = sub.add_parser("perceive", help="run DODT on a recorded RGB-D sequence (TUM format, a simulate "
                                         "output or a folder of frames); write tracks, timings, a summary and "
                                         "annotated images")
@@ -393,8 +404,9 @@ def add_parser(sub) -> None:
                    help="JSON {fx, fy, cx, cy[, depth_factor]} or a line 'fx fy cx cy' (default: the folder's "
                         "intrinsics.json)")
     for k in ("fx", "fy", "cx", "cy"):
-        p.add_argument(f"--{k}", type=float, default=None, help=f"the depth camera's {k} [px]")
-    p.add_argument("--depth-factor", type=float, default=None,
+        p.add_argument(f"--{k}", type=real(0.0, MAX_FOCAL, lo_open=True) if k in ("fx", "fy") else
+                       real(-MAX_FOCAL, MAX_FOCAL), default=None, help=f"the depth camera's {k} [px]")
+    p.add_argument("--depth-factor", type=real(0.0, MAX_DEPTH_FACTOR, lo_open=True), default=None,
                    help="depth units per metre (default: the intrinsics file's, else 5000 as in TUM RGB-D; "
                         "millimetre images: 1000). With --fit-floor a camera height outside "
                         f"{PLAUSIBLE_CAMERA_HEIGHT[0]:g}-{PLAUSIBLE_CAMERA_HEIGHT[1]:g} m is warned of: most likely a "
@@ -404,14 +416,15 @@ def add_parser(sub) -> None:
     p.add_argument("--fit-floor", action="store_true",
                    help="the camera's height, pitch and roll from the floor in the first frames, a z-up world "
                         "(a fixed camera without poses; with poses, their world turned to the floor)")
-    p.add_argument("--camera-height", type=float, default=None, help="a fixed camera's height above the floor [m]")
-    p.add_argument("--pitch", type=float, default=None, help="a fixed camera's tilt below the horizon [deg]")
-    p.add_argument("--roll", type=float, default=0.0, help="a fixed camera's roll [deg] (default 0)")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+    p.add_argument("--camera-height", type=real(0.0, 100.0, lo_open=True), default=None,
+                   help="a fixed camera's height above the floor [m]")
+    p.add_argument("--pitch", type=real(-90.0, 90.0), default=None, help="a fixed camera's tilt below the horizon [deg]")
+    p.add_argument("--roll", type=real(-180.0, 180.0), default=0.0, help="a fixed camera's roll [deg] (default 0)")
+    p.add_argument("--rate", type=real(0.0, 1000.0, lo_open=True), default=None, metavar="HZ",
                    help="frames with per-frame timestamps (TUM's lists, timestamp file names, a simulate output) "
                         "are decimated to this rate; a folder of frames without timestamps (depth/000123.png) was "
                         "recorded at this rate, its stamps are frame number / HZ")
-    p.add_argument("--max-frames", type=int, default=None, help="stop after this many frames")
+    p.add_argument("--max-frames", type=whole(1), default=None, help="stop after this many frames")
     p.add_argument("--images", action="store_true", help="write annotated images into OUT/annotated/")
     p.add_argument("--video", action="store_true", help="write OUT/annotated.mp4")
     p.add_argument("--detector", default=None, metavar="ONNX",
@@ -419,13 +432,14 @@ def add_parser(sub) -> None:
                         "YOLO11 / YOLOv5 / YOLOX model, or one of ours")
     p.add_argument("--detector-layout", default="auto", choices=("auto", "dodt", "yolov8", "yolov5", "yolox"),
                    help="the detector's output layout (default: told from its output)")
-    p.add_argument("--person-class", type=int, default=0, help="the detector's person class (COCO: 0)")
+    p.add_argument("--person-class", type=whole(0, 100_000), default=0, help="the detector's person class (COCO: 0)")
     p.add_argument("--detector-input", default=None, metavar="WxH",
                    help="the detector's input size, for a model whose input size is not fixed")
-    p.set_defaults(func=run_cli)
+    p.set_defaults(func=run_cli, output_folder=output_folder)
 
 
 def run_cli(args) -> int:
+    args.output_folder(args.out)  # refused before the sequence is read
     s = perceive(args.sequence, args.out, config=args.config, assignments=args.set, intrinsics=args.intrinsics,
                  fx=args.fx, fy=args.fy, cx=args.cx, cy=args.cy, depth_factor=args.depth_factor, poses=args.poses,
                  fit_floor=args.fit_floor, camera_height=args.camera_height, pitch=args.pitch, roll=args.roll,

@@ -23,6 +23,12 @@ class PluginError(ValueError):
     """A spec that does not name a usable class; the message has no option name (the CLI adds it)."""
 
 
+def _failure(e: BaseException) -> str:
+    """A plug-in's exception in words; ``sys.exit`` and exceptions outside the Exception family count as
+    failures of the plug-in too (only a keyboard interrupt is passed on, by the callers)."""
+    return f"{type(e).__name__}: {e}"[:500]
+
+
 def is_spec(text: str) -> bool:
     """A ``module:Class`` spec (built-in names hold no colon)."""
     return isinstance(text, str) and ":" in text
@@ -43,18 +49,23 @@ def _load_module(name: str):
         sys.modules[key] = module  # dataclasses and pickling look classes up here
         try:
             spec.loader.exec_module(module)
-        except Exception as e:  # noqa: BLE001 - the user's file: report it in one line
+        except KeyboardInterrupt:
             del sys.modules[key]
-            raise PluginError(f"importing {name} failed: {type(e).__name__}: {e}") from None
+            raise
+        except BaseException as e:  # noqa: BLE001 - the user's file (sys.exit too): report it in one line
+            del sys.modules[key]
+            raise PluginError(f"importing {name} failed: {_failure(e)}") from None
         return module
     try:
         return importlib.import_module(name)
     except ModuleNotFoundError as e:
         if e.name and (name == e.name or name.startswith(e.name + ".")):
             raise PluginError(f"no such module {name!r} (not importable; a file path ends in .py)") from None
-        raise PluginError(f"importing {name} failed: {type(e).__name__}: {e}") from None
-    except Exception as e:  # noqa: BLE001
-        raise PluginError(f"importing {name} failed: {type(e).__name__}: {e}") from None
+        raise PluginError(f"importing {name} failed: {_failure(e)}") from None
+    except KeyboardInterrupt:
+        raise
+    except BaseException as e:  # noqa: BLE001
+        raise PluginError(f"importing {name} failed: {_failure(e)}") from None
 
 
 def load_class(spec: str) -> type:
@@ -64,9 +75,14 @@ def load_class(spec: str) -> type:
         raise PluginError(f"{spec!r}: expected module:Class (a dotted module or a .py file, a colon, a class name)")
     obj = _load_module(module_name)
     for part in attr.split("."):
-        if not hasattr(obj, part):
-            raise PluginError(f"{module_name} has no class {attr!r}")
-        obj = getattr(obj, part)
+        try:
+            obj = getattr(obj, part)
+        except KeyboardInterrupt:
+            raise
+        except AttributeError:
+            raise PluginError(f"{module_name} has no class {attr[:200]!r}") from None
+        except BaseException as e:  # noqa: BLE001 - a module's own __getattr__
+            raise PluginError(f"{module_name}: looking up {attr[:200]!r} failed: {_failure(e)}") from None
     if not isinstance(obj, type):
         raise PluginError(f"{spec}: {attr!r} is not a class")
     return obj
@@ -75,16 +91,28 @@ def load_class(spec: str) -> type:
 def config_class(spec: str) -> type | None:
     """The configuration dataclass a plug-in class declares as ``config_class``, or None."""
     cls = load_class(spec)
-    own = getattr(cls, "config_class", None)
+    own = _attribute(cls, "config_class")
     if own is None:
         return None
     if not (isinstance(own, type) and dataclasses.is_dataclass(own)):
         raise PluginError(f"{spec}: its config_class must be a dataclass, not {own!r}")
     try:
         own()
-    except Exception as e:  # noqa: BLE001 - the user's class
-        raise PluginError(f"{spec}: {own.__name__}() (its defaults) failed: {type(e).__name__}: {e}") from None
+    except KeyboardInterrupt:
+        raise
+    except BaseException as e:  # noqa: BLE001 - the user's class
+        raise PluginError(f"{spec}: {own.__name__}() (its defaults) failed: {_failure(e)}") from None
     return own
+
+
+def _attribute(obj, name: str):
+    """``getattr(obj, name, None)``, also None when the object's own ``__getattr__`` fails otherwise."""
+    try:
+        return getattr(obj, name, None)
+    except KeyboardInterrupt:
+        raise
+    except BaseException:  # noqa: BLE001 - the user's class: a method it cannot give is one it lacks
+        return None
 
 
 def load_plugin(spec: str, methods: tuple[str, ...], protocol: str, where: str, config=None):
@@ -97,10 +125,12 @@ def load_plugin(spec: str, methods: tuple[str, ...], protocol: str, where: str, 
         config = own()
     try:
         obj = cls() if own is None else cls(config)
-    except Exception as e:  # noqa: BLE001
+    except KeyboardInterrupt:
+        raise
+    except BaseException as e:  # noqa: BLE001
         how = "() (no arguments)" if own is None else f"({own.__name__})"
-        raise PluginError(f"{spec}: {cls.__name__}{how} failed: {type(e).__name__}: {e}") from None
-    missing = [m for m in methods if not callable(getattr(obj, m, None))]
+        raise PluginError(f"{spec}: {cls.__name__}{how} failed: {_failure(e)}") from None
+    missing = [m for m in methods if not callable(_attribute(obj, m))]
     if missing:
         raise PluginError(f"{spec}: {cls.__name__} does not implement the {protocol} protocol ({where}): no "
                           + " or ".join(f"{m}()" for m in missing) + " method")

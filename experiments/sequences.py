@@ -47,8 +47,16 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dodt.frames import CameraIntrinsics, SensorFrame
+from experiments.config import TextFileError
+from experiments.config import read_text as read_bounded
 
 TUM_DEPTH_FACTOR = 5000.0  # depth units per metre in the TUM RGB-D format
+MAX_TEXT_BYTES = 16 << 20  # a list, pose or sensor file larger than this is refused unread
+MAX_SMALL_BYTES = 1 << 20  # an intrinsics file larger than this is refused unread
+MAX_PNG_BYTES = 256 << 20  # an image file larger than this is skipped as unreadable
+MAX_FOCAL = 1e6  # px: the largest focal length (and principal point offset) taken from a file or option
+MAX_SIDE = 65536  # px: the largest image width or height
+MAX_DEPTH_FACTOR = 1e7  # depth units per metre
 
 
 class SequenceError(ValueError):
@@ -58,13 +66,31 @@ class SequenceError(ValueError):
 # --------------------------------------------------------------------------- small readers
 
 
+def read_text(path: Path, limit: int = MAX_TEXT_BYTES) -> str:
+    """A small UTF-8 text file of a sequence, read no further than ``limit`` bytes; SequenceError naming
+    the file when it is not a regular file, is larger, is not UTF-8 or holds NUL bytes."""
+    try:
+        return read_bounded(path, limit, "a sequence's text file")
+    except TextFileError as e:
+        raise SequenceError(str(e)) from None
+
+
+def read_json(path: Path):
+    """A sequence's JSON file (read_text's limits); SequenceError naming the file when it is not JSON."""
+    try:
+        return json.loads(read_text(path))
+    except json.JSONDecodeError as e:
+        raise SequenceError(f"{path}: not valid JSON ({e})") from None
+    except RecursionError:
+        raise SequenceError(f"{path}: nested too deep") from None
+    except ValueError as e:  # an integer of more digits than Python converts
+        raise SequenceError(f"{path}: {e}") from None
+
+
 def read_list(path: Path) -> list[tuple[float, str]]:
     """A TUM list file: (stamp, rest of the line) per line, sorted by stamp; ``#`` lines skipped."""
     out = []
-    try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
-    except UnicodeDecodeError:
-        raise SequenceError(f"{path}: not a text file") from None
+    lines = read_text(path).splitlines()
     for i, line in enumerate(lines, 1):
         line = line.strip()
         if not line or line.startswith("#"):
@@ -153,10 +179,12 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
 def read_intrinsics(path: Path) -> dict:
     """{"fx", "fy", "cx", "cy"} and any of "width", "height", "depth_factor" from a JSON file, or
     fx fy cx cy from the first line of a text file."""
-    text = Path(path).read_text(encoding="utf-8")
+    text = read_text(path, MAX_SMALL_BYTES)
     try:
         data = json.loads(text)
-    except json.JSONDecodeError:
+    except RecursionError:
+        raise SequenceError(f"{path}: nested too deep") from None
+    except ValueError:
         parts = text.split()
         try:
             vals = [float(x) for x in parts[:4]]
@@ -179,7 +207,25 @@ def read_intrinsics(path: Path) -> dict:
                 raise SequenceError(f"{path}: {k} must be a number, got {data[k]!r}") from None
             if not math.isfinite(out[k]):
                 raise SequenceError(f"{path}: {k} must be finite, got {data[k]!r}")
+    check_intrinsics(out, str(path))
     return out
+
+
+def check_intrinsics(values: dict, where: str) -> None:
+    """SequenceError naming ``where`` and the key when a value is out of its range: fx, fy in (0, 1e6] px,
+    cx, cy within +-1e6 px, width and height whole numbers in [1, 65536], depth_factor in (0, 1e7]."""
+    for k, v in values.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SequenceError(f"{where}: {k} must be a finite number, got {v!r}")
+        if k in ("fx", "fy") and not 0 < v <= MAX_FOCAL:
+            raise SequenceError(f"{where}: {k} must be above 0 and at most {MAX_FOCAL:g} px, got {v!r}")
+        if k in ("cx", "cy") and not abs(v) <= MAX_FOCAL:
+            raise SequenceError(f"{where}: {k} must lie within +-{MAX_FOCAL:g} px, got {v!r}")
+        if k in ("width", "height") and not (v == int(v) and 1 <= v <= MAX_SIDE):
+            raise SequenceError(f"{where}: {k} must be a whole number of pixels in [1, {MAX_SIDE}], got {v!r}")
+        if k == "depth_factor" and not 0 < v <= MAX_DEPTH_FACTOR:
+            raise SequenceError(f"{where}: {k} must be above 0 and at most {MAX_DEPTH_FACTOR:g} units per metre, "
+                                f"got {v!r}")
 
 
 # --------------------------------------------------------------------------- sequences
@@ -256,11 +302,23 @@ class Sequence:
 
 
 def _read_png(path: Path, dtype, color: bool = False) -> np.ndarray | None:
+    """The image, or None when it cannot be read: missing, not a file, larger than MAX_PNG_BYTES, broken.
+    OpenCV's own log lines about a broken file are silenced: the frame is counted as unreadable instead."""
     flags = cv2.IMREAD_COLOR if color else cv2.IMREAD_UNCHANGED
+    try:
+        if not path.is_file() or path.stat().st_size > MAX_PNG_BYTES:
+            return None
+    except OSError:
+        return None
+    log = cv2.utils.logging
+    level = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_SILENT)
     try:
         img = cv2.imread(str(path), flags)
     except cv2.error:
         return None
+    finally:
+        log.setLogLevel(level)
     if img is None or img.dtype != dtype or (not color and img.ndim != 2):
         return None
     return img
@@ -273,9 +331,12 @@ def _intrinsics(root: Path, options: dict, intrinsics_file: Path | None, size: t
     file = intrinsics_file or (root / "intrinsics.json" if (root / "intrinsics.json").is_file() else None)
     if file is not None:
         if not Path(file).is_file():
-            raise SequenceError(f"{file}: no such intrinsics file")
+            raise SequenceError(f"--intrinsics: {file}: no such file" if intrinsics_file else
+                                f"{file}: no such intrinsics file")
         values.update(read_intrinsics(Path(file)))
-    values.update({k: float(v) for k, v in options.items() if v is not None})
+    given = {k: float(v) for k, v in options.items() if v is not None}
+    check_intrinsics({f"--{k}": v for k, v in given.items()}, "options")
+    values.update(given)
     missing = [k for k in ("fx", "fy", "cx", "cy") if k not in values]
     if missing:
         raise SequenceError(f"{root}: no camera intrinsics ({', '.join(missing)} missing): give --intrinsics FILE "
@@ -333,7 +394,7 @@ def _pose_track(root: Path, poses, max_pose_gap: float) -> tuple[PoseTrack | Non
     p = Path(poses)
     p = p if p.is_absolute() or p.is_file() else root / p
     if not p.is_file():
-        raise SequenceError(f"{p}: no such pose file")
+        raise SequenceError(f"--poses: {p}: {'not a regular file' if p.exists() else 'no such file'}")
     stamps, rows = read_poses(p)
     return PoseTrack(stamps, rows, max_pose_gap), str(p)
 
@@ -341,7 +402,7 @@ def _pose_track(root: Path, poses, max_pose_gap: float) -> tuple[PoseTrack | Non
 def _depth_factor(depth_factor: float | None, values: dict) -> float:
     """Depth units per metre: the option's, else the intrinsics file's, else TUM's 5000."""
     factor = depth_factor if depth_factor is not None else values.get("depth_factor", TUM_DEPTH_FACTOR)
-    if not (math.isfinite(factor) and factor > 0):
+    if not (math.isfinite(factor) and 0 < factor <= MAX_DEPTH_FACTOR):
         raise SequenceError(f"--depth-factor: must be a number of depth units per metre above 0, got {factor}")
     return factor
 
@@ -415,27 +476,84 @@ def _open_tum(root, intrinsics_file, opts, depth_factor, poses, max_difference, 
     return Sequence(root, "tum", K, 1.0 / factor, refs, pose_source)
 
 
+def _field(d, key: str, kind: str, where: str):
+    """``d[key]`` checked: "number" a finite number, "whole" a whole number >= 0, "path" a relative path
+    (text); SequenceError naming ``where`` and the key otherwise."""
+    if not isinstance(d, dict) or key not in d:
+        raise SequenceError(f"{where}: no {key}")
+    v = d[key]
+    if kind == "path":
+        if not isinstance(v, str) or not v or "\x00" in v:
+            raise SequenceError(f"{where}: {key} must be a file path (text), got {v!r}"[:300])
+        return v
+    ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+    if kind == "whole":
+        ok = ok and v == int(v) and 0 <= v < 2**53
+    if not ok:
+        raise SequenceError(f"{where}: {key} must be a {'whole number >= 0' if kind == 'whole' else 'finite number'}, "
+                            f"got {v!r}"[:300])
+    return int(v) if kind == "whole" else float(v)
+
+
 def _open_sim(root, intrinsics_file, opts, depth_factor, poses, max_pose_gap) -> Sequence:
-    try:
-        sensor = json.loads((root / "sensor.json").read_text(encoding="utf-8"))
-        k = sensor["intrinsics"]
-        frames = sensor["frames"]
-    except (json.JSONDecodeError, KeyError, TypeError):
-        raise SequenceError(f"{root / 'sensor.json'}: not a dodt-nav simulate sensor file") from None
-    values = {key: k[key] for key in ("fx", "fy", "cx", "cy")}
-    values.update({key: v for key, v in opts.items() if v is not None})
+    path = root / "sensor.json"
+    sensor = read_json(path)
+    if not isinstance(sensor, dict) or not isinstance(sensor.get("intrinsics"), dict) \
+            or not isinstance(sensor.get("frames"), list):
+        raise SequenceError(f"{path}: not a dodt-nav simulate sensor file (an object with intrinsics and a list of "
+                            "frames)")
+    k, frames = sensor["intrinsics"], sensor["frames"]
+    if not frames:
+        raise SequenceError(f"{path}: lists no frames")
+    bad = next((i for i, f in enumerate(frames) if not isinstance(f, dict)), None)
+    if bad is not None:
+        raise SequenceError(f"{path}: frames[{bad}]: not an object")
+    values = {key: _field(k, key, "number", f"{path}: intrinsics") for key in ("fx", "fy", "cx", "cy")}
+    size = {key: _field(k, key, "number", f"{path}: intrinsics") for key in ("width", "height")}
+    check_intrinsics(values | size, f"{path}: intrinsics")
+    given = {key: float(v) for key, v in opts.items() if v is not None}
+    check_intrinsics({f"--{key}": v for key, v in given.items()}, "options")
+    values.update(given)
     if intrinsics_file:
-        values.update(read_intrinsics(Path(intrinsics_file)))
-    K = CameraIntrinsics(width=int(k["width"]), height=int(k["height"]), **{key: float(values[key]) for key in values})
-    scale = float(sensor.get("depth_scale", 0.001)) if depth_factor is None else 1.0 / depth_factor
+        if not Path(intrinsics_file).is_file():
+            raise SequenceError(f"--intrinsics: {intrinsics_file}: no such file")
+        values.update({key: v for key, v in read_intrinsics(Path(intrinsics_file)).items()
+                       if key in ("fx", "fy", "cx", "cy")})
+    K = CameraIntrinsics(width=int(size["width"]), height=int(size["height"]), **values)
+    w, h = _first_size([root / f["depth"] for f in frames[:20] if isinstance(f, dict) and isinstance(f.get("depth"), str)])
+    if (w, h) != (K.width, K.height):
+        raise SequenceError(f"{path}: the intrinsics are for {K.width}x{K.height} but the depth images are {w}x{h}")
+    if depth_factor is None:
+        scale = _field(sensor, "depth_scale", "number", str(path)) if "depth_scale" in sensor else 0.001
+        if not 0 < scale <= 1.0:
+            raise SequenceError(f"{path}: depth_scale must be metres per depth unit in (0, 1], got {scale!r}")
+    else:
+        scale = 1.0 / depth_factor
     # the poses the frames carry, unless a trajectory file is named
     track, pose_source = _pose_track(root, poses, max_pose_gap) if poses not in (None, "none") else (None, None)
     refs = []
-    for f in frames:
-        T = track.at(float(f["stamp"])) if track is not None else np.array(f["T_world_camera"], float)
-        refs.append(FrameRef(int(f["seq"]), float(f["stamp"]), root / f["depth"],
-                             root / f["color"] if f.get("color") else None, T))
-    return Sequence(root, "dodt-sim", K, scale, refs, pose_source or str(root / "sensor.json"))
+    for i, f in enumerate(frames):
+        where = f"{path}: frames[{i}]"
+        if not isinstance(f, dict):
+            raise SequenceError(f"{where}: not an object")
+        stamp = _field(f, "stamp", "number", where)
+        if track is not None:
+            T = track.at(stamp)
+        else:
+            try:
+                T = np.array(f["T_world_camera"], float)
+            except KeyError:
+                raise SequenceError(f"{where}: no T_world_camera") from None
+            except (TypeError, ValueError, OverflowError):
+                T = None
+            if T is None or T.shape != (4, 4) or not np.all(np.isfinite(T)):
+                raise SequenceError(f"{where}: T_world_camera must be a 4x4 matrix of finite numbers")
+        color = f.get("color")
+        if color is not None and (not isinstance(color, str) or "\x00" in color):
+            raise SequenceError(f"{where}: color must be a file path (text) or null, got {color!r}"[:300])
+        refs.append(FrameRef(_field(f, "seq", "whole", where), stamp, root / _field(f, "depth", "path", where),
+                             root / color if color else None, T))
+    return Sequence(root, "dodt-sim", K, scale, refs, pose_source or str(path))
 
 
 # --------------------------------------------------------------------------- writing

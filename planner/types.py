@@ -7,7 +7,8 @@ truth, someone else's detector). Units SI, world frame (x along the corridor, y 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -42,6 +43,26 @@ def _predict(times, c, v, a, horizon, vmax):
         for d in range(3):
             out[k, d] = c[d] + ((v[d] * ta + 0.5 * a[d] * ta * ta) + (ve[d] * f) * (t - ta))
     return out
+
+
+def finite_obstacle(ob) -> bool:
+    """Whether an obstacle can be used: (3,) finite centre, size, velocity and acceleration, and finite
+    position_std, std_growth, accel_horizon and max_speed. A planner drops the others at its boundary (a NaN
+    there would reach a division and poison the whole plan)."""
+    try:
+        vecs = np.asarray((ob.center, ob.size, ob.velocity, ob.acceleration), dtype=float)
+        total = float(vecs.sum()) + float(ob.position_std) + float(ob.std_growth) + float(ob.accel_horizon) \
+            + float(ob.max_speed)
+    except (AttributeError, TypeError, ValueError, OverflowError):
+        return False
+    return vecs.shape == (4, 3) and math.isfinite(total)  # a NaN or an infinity anywhere makes the sum one
+
+
+def usable_obstacles(inp: "PlannerInput") -> tuple["PlannerInput", int]:
+    """``inp`` without the obstacles finite_obstacle refuses, and how many it dropped."""
+    kept = tuple(ob for ob in inp.obstacles if finite_obstacle(ob))
+    dropped = len(inp.obstacles) - len(kept)
+    return (replace(inp, obstacles=kept) if dropped else inp), dropped
 
 
 @dataclass(frozen=True, eq=False)

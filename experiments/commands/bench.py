@@ -2,6 +2,7 @@
 planner, the closed loop's real-time factor)."""
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -27,6 +28,7 @@ APPLIES_TO = {
     "--frames": ("sim",),
     "--json": ("sim", "runtime", "planner"),
     "--renderer": ("loop",),
+    "--people": ("planner",),
 }
 # The value of an option that was not given, where it has one (the rest: None, --quick False).
 DEFAULTS = {"--scenario": "corridor", "--seconds": 10.0, "--out": "runs/bench_perception", "--config": "dodt",
@@ -74,6 +76,19 @@ def add_parser(sub) -> None:
     opt("--frames", "frames for the render medians (default 30)", type=whole(1, 100_000))
     opt("--json", "also write the figures as JSON", type=Path)
     opt("--renderer", RENDERER_HELP, choices=RENDERER_CHOICES)
+    opt("--people", "only the time per plan against these numbers of people in range (comma list, "
+                    "e.g. 10,50,200)", type=_counts, metavar="N,...")
+
+
+def _counts(text: str) -> tuple[int, ...]:
+    """--people: a comma list of whole numbers of people, 1 to 2000 each."""
+    try:
+        counts = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a comma list of whole numbers, got {text!r}") from None
+    if not counts or len(counts) > 20 or not all(1 <= n <= 2000 for n in counts):
+        raise argparse.ArgumentTypeError(f"expected 1 to 20 numbers of people in [1, 2000], got {text!r}")
+    return counts
 
 
 def check_applies(args) -> None:
@@ -131,6 +146,11 @@ def cmd_bench(args) -> int:
         from experiments.bench_map import bench_update
         from experiments.bench_mpc import bench_mpc
 
+        if args.people:
+            out = bench_planner.people_scaling(args.people)
+            if args.json:
+                args.json.write_text(json.dumps(out, indent=1) + "\n")
+            return 0
         bench_update()
         for seed in range(3):
             bench_mpc(seed=seed)

@@ -11,7 +11,7 @@ from sim.scenario import RENDERER_CHOICES, load_scenario
 from experiments.commands.common import (PERCEPTION_HELP, RENDERER_HELP, SCENARIO_HELP, LazyText, UserError,
                                          add_command, add_episode_options, builtin_names, check_perception,
                                          check_planner, describe, dodt_presets, episode_config, examples,
-                                         output_folder, seconds, seed, settings, whole)
+                                         output_folder, real, seconds, seed, settings, whole)
 from experiments.config import ConfigError
 
 RUN_EXAMPLES = examples(
@@ -68,7 +68,7 @@ def add_perceive_parser(sub) -> None:
     """`perceive`: its options and handler are experiments.perceive's; its help text is given here."""
     from experiments.perceive import add_parser as add_perceive
 
-    add_perceive(sub)
+    add_perceive(sub, real, whole, output_folder)
     describe(
         sub.choices["perceive"],
         "Run DODT alone, open loop, on a recorded RGB-D sequence: a TUM RGB-D folder (from a real camera), "

@@ -157,7 +157,10 @@ def cmd_sweep(args) -> int:
     print(f"wrote {args.out}/summary.json, {args.out}/summary.md")
     if args.junit:
         by_seed = sweep.read_results(Path(args.out) / sweep.RESULTS)
-        Path(args.junit).write_text(sweep.junit(agg, by_seed))
+        try:
+            Path(args.junit).write_text(sweep.junit(agg, by_seed))
+        except OSError as e:  # a full disk (/dev/full) fails on the write, whose error names no file
+            raise UserError(f"--junit: cannot write {args.junit}: {e.strerror or e}") from None
         print(f"wrote {args.junit}")
     status = 0
     errs = agg.get("module_errors") or []

@@ -28,13 +28,35 @@ def _tie_break(d0, d1, d2, s, bias):
     return d0 + e * s[0], d1 + e * s[1], d2 + e * s[2]
 
 
+def within_reach(cfg: MPCConfig, c, obstacles, T: float) -> np.ndarray:
+    """Indices of the obstacles that may come within dynamic_range of the plan ``c`` (N, 3) in T seconds:
+    culled by reach, not by count. An obstacle moves at most (|v| + |a| T) T from its centre in T seconds
+    (constant acceleration; the prediction's speed cap and acceleration horizon only shorten that), and its
+    ellipsoid's largest semi-axis is at most its half size plus the clearances plus z_std times its largest
+    standard deviation; one whose centre stays farther than the sum from every point of the plan is one
+    dynamic_candidates would refuse, so the cull changes no plan."""
+    if not len(obstacles):
+        return np.zeros(0, dtype=int)
+    centers = np.array([np.asarray(ob.center, dtype=float) for ob in obstacles])
+    speed = np.array([np.linalg.norm(np.asarray(ob.velocity, dtype=float)) for ob in obstacles])
+    accel = np.array([np.linalg.norm(np.asarray(ob.acceleration, dtype=float)) for ob in obstacles])
+    half = np.array([np.max(np.asarray(ob.size, dtype=float)) / 2 for ob in obstacles])
+    std = np.array([max(float(ob.position_std) + float(ob.std_growth) * T, float(ob.position_std))
+                    for ob in obstacles])
+    reach = (speed + accel * T) * T + half + cfg.robot_radius + cfg.dynamic_margin + cfg.z_std * np.abs(std)
+    gap = np.sqrt(np.min(((centers[:, None, :] - np.asarray(c, dtype=float)[None]) ** 2).sum(axis=2), axis=1))
+    keep = ~(gap - reach > cfg.dynamic_range + 1e-6)  # NaN stays in: dynamic_candidates decides as before
+    return np.flatnonzero(keep)
+
+
 def dynamic_candidates(cfg: MPCConfig, c, obstacles, side, v_plan=None):
     """The obstacles (4) applies to, nearest first: (distance from the plan to the ellipsoid, index in
     `obstacles`, predicted centres (N, 3), semi-axes (N, 3), tie-break side (3,)), at most max_dynamic."""
     N = cfg.horizon
     t = cfg.dt * np.arange(1, N + 1)
     cand = []
-    for idx, ob in enumerate(obstacles):
+    for idx in within_reach(cfg, c, obstacles, t[-1]):
+        ob = obstacles[idx]
         sd = side
         if cfg.relative_side and v_plan is not None:
             vo = np.asarray(ob.velocity, dtype=float)

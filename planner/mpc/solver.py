@@ -46,7 +46,7 @@ from planner.fallback import brake_and_hold
 from planner.mpc.config import MPCConfig
 from planner.mpc.qp import QPLayout, rollout
 from planner.mpc.rows import dynamic_candidates, dynamic_rows, finite_rows, static_rows
-from planner.types import Trajectory
+from planner.types import Trajectory, finite_obstacle
 
 __all__ = ["MPC", "MPCResult"]
 
@@ -186,8 +186,7 @@ class MPC:
             return self._fallback(t0, p0, v0, "nonfinite_input", tic)
         if np.any(np.abs(v0) > qp.vmax - cfg.backoff + qp.amax * dt):  # step-1 velocity bound unreachable
             return self._fallback(t0, p0, v0, "infeasible_start", tic)
-        obs = [ob for ob in obstacles if all(np.all(np.isfinite(np.asarray(x, dtype=float))) for x in
-                                             (ob.center, ob.size, ob.velocity, ob.acceleration, ob.position_std))]
+        obs = [ob for ob in obstacles if finite_obstacle(ob)]
         ignored = len(obstacles) - len(obs)
         pts = np.zeros((0, 3)) if static_points is None else np.asarray(static_points, dtype=float).reshape(-1, 3)
         pts = finite_rows(pts)

@@ -30,7 +30,7 @@ from planner.mpc.solver import MPC
 from planner.nominal.global_path import CostToGo, PathFollower, block_discs, grid_path
 from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector
 from planner.nominal.view import ViewTerm
-from planner.types import PlannerInput, Trajectory
+from planner.types import PlannerInput, Trajectory, usable_obstacles
 
 
 @dataclass(frozen=True)
@@ -248,6 +248,7 @@ class MPCPlanner:
         a_max = self.cfg.mpc.a_max_xy
         if not valid_input(inp):
             return invalid_input_stop(inp, a_max)
+        inp, _ = usable_obstacles(inp)  # one with non-finite fields is dropped (the shield counts them)
         try:
             traj = self._plan(inp, tic)
             if not (isinstance(traj, Trajectory) and all(np.all(np.isfinite(a)) for a in (

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +27,7 @@ from planner.map.clearance import static_clearance
 from planner.map.distance import opencv_distance
 from planner.shield.candidates import Candidates, backups, roll, target_velocities
 from planner.shield.safety import check, in_the_way
-from planner.types import ObstaclePrediction, PlannerInput, Trajectory
+from planner.types import ObstaclePrediction, PlannerInput, Trajectory, usable_obstacles
 
 
 # Why the shield stops remembering a person no longer reported: ``memory`` ran out; reported for under
@@ -86,6 +87,7 @@ class PassiveSafetyShield:
         self._anchor = None  # (2,) where the current hold began
         self.threats = None  # (M, 3) x, y, radius of the people's discs at the last plan (for the episode log)
         self.forgotten = []  # (x, y, reason) of the people it stopped remembering at the last plan (FORGET_REASONS)
+        self.dropped_obstacles = 0  # obstacles with non-finite fields dropped at the boundary this episode
 
     @property
     def path(self):
@@ -187,6 +189,12 @@ class PassiveSafetyShield:
 
     def plan(self, inp: PlannerInput) -> Trajectory:
         t0 = time.perf_counter()
+        inp, dropped = usable_obstacles(inp)
+        if dropped:
+            if not self.dropped_obstacles:
+                warnings.warn(f"planner: an obstacle with non-finite fields was dropped at t = {inp.stamp} s; later "
+                              "ones are counted (dropped_obstacles)", RuntimeWarning, stacklevel=2)
+            self.dropped_obstacles += dropped
         try:
             tr = self._plan(inp)
         except Exception as e:  # noqa: BLE001 - a planner never raises: it stops instead, saying why

@@ -225,7 +225,7 @@ def test_the_tum_writer_round_trip(tmp_path):
 
 @pytest.mark.parametrize("setup, kwargs, match", [
     ("none", {}, r"no camera intrinsics \(fx, fy, cx, cy missing\): give --intrinsics FILE"),
-    ("text", {"intrinsics": "nothing.txt"}, r"nothing.txt: no such intrinsics file"),
+    ("text", {"intrinsics": "nothing.txt"}, r"--intrinsics: nothing.txt: no such file"),
     ("badfile", {}, r"camera.txt: expected JSON with fx, fy, cx, cy"),
     ("text", {"fx": -1.0}, r"intrinsics fx must be above 0"),
     ("text", {"camera_height": 2.0}, r"--camera-height and --pitch go together"),
@@ -234,7 +234,7 @@ def test_the_tum_writer_round_trip(tmp_path):
     ("text", {"config": "dodt-fast"}, r"--config: unknown configuration 'dodt-fast'"),
     ("text", {"assignments": ["kalman.q_pos=fast"]}, r"--set kalman.q_pos=fast: expected a number"),
     ("text", {"detector": "none.onnx"}, r"--detector: none.onnx: no such model file"),
-    ("text", {"poses": "nothing.txt"}, r"nothing.txt: no such pose file"),
+    ("text", {"poses": "nothing.txt"}, r"--poses: .*nothing.txt: no such file"),
     ("badline", {}, r"depth.txt, line 3: expected 'timestamp \.\.\.'"),
     ("size", {}, r"the intrinsics are for 320x240 but the depth images are 640x480"),
 ])
