@@ -378,6 +378,15 @@ class LidarDetectorConfig:
     max_footprint: float = 2.0  # m: a wider cluster is structure
     structure_fraction: float = 0.5  # of a box on established static voxels: structure
     floor_tolerance: float = 0.15  # m above the lowest ray's reach: the box reaches the floor
+    # identification of a track a LiDAR box updated (dodt.tracker): point voting against the union of the
+    # clouds of the vote_scans newest scans at least vote_span old, a point voting dynamic above
+    # vote_velocity. One scan's lines leave gaps of up to a few degrees (15-30 cm at 5 m); three scans
+    # fill them to a few centimetres (6-8 cm at 5-6 m, 90th percentile), which over vote_span reads as
+    # under half of vote_velocity, while the points of a walker's side that faces the sensor move
+    # 0.25 m or more, beyond the part of its own earlier place they still overlap
+    vote_span: float = 0.5  # s
+    vote_scans: int = 3
+    vote_velocity: float = 0.25  # m/s
 
 
 @dataclass(frozen=True)

@@ -227,7 +227,8 @@ class DODT:
         grow = self.cfg.lidar.voxel
         found = self.lidar(scan, static_map, geofence, el_min)
         self.lidar_clouds.append((stamp, self.lidar.last_cloud))
-        span = self.cfg.identification.vote_span + 0.25  # s: the voting's reach back, and a scan period or two
+        # s: the voting's reach back and its scans (at 10 Hz), and a period to spare
+        span = self.cfg.lidar.vote_span + 0.1 * (self.cfg.lidar.vote_scans + 1)
         while self.lidar_clouds and self.lidar_clouds[0][0] < stamp - span:
             self.lidar_clouds.popleft()
         for d in found:

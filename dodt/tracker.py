@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import islice
 
 import numpy as np
@@ -420,13 +420,17 @@ class Track:
         self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))
 
     def _identify_by_lidar(self, speed: float, now: float, points: np.ndarray, lidar_clouds) -> None:
-        """``identify`` for a track a LiDAR box updated: the same point voting against the LiDAR's cloud of
-        the newest scan at least ``vote_span`` old (its view is all round: every point was in it)."""
-        cfg = self.cfg.identification
-        then = [(t, c) for t, c in lidar_clouds if t <= now - cfg.vote_span + 1e-6]
+        """``identify`` for a track a LiDAR box updated: the same point voting, at ``lidar.vote_velocity``
+        (dodt.config), against the union of the clouds of the ``lidar.vote_scans`` newest scans at least
+        ``lidar.vote_span`` old (one scan's pattern leaves gaps of a few degrees that the next ones fill), the
+        LiDAR's view all round (every point was in it)."""
+        lc = self.cfg.lidar
+        cfg = replace(self.cfg.identification, vote_velocity=lc.vote_velocity)
+        then = [(t, c) for t, c in lidar_clouds if t <= now - lc.vote_span + 1e-6][-lc.vote_scans:]
         votes, valid, skipped = 0, 0, len(points)
         if then and speed >= cfg.velocity_threshold and len(points):
-            t_then, cloud = then[-1]
+            t_then = then[-1][0]
+            cloud = np.concatenate([c for _, c in then]) if len(then) > 1 else then[0][1]
             old = [c for c in self.clouds if c[1] <= t_then + 1e-6]
             dt = now - t_then
             if len(cloud) and dt > 0:

@@ -27,6 +27,7 @@ from dodt.presets import PRESETS, preset
 from experiments.perception_metrics import RECALL_BINS, PerceptionMetrics, bin_labels
 from experiments.figures import new_figure
 from sim import World, load_scenario
+from sim.rig import cameras, lidars, rig
 from sim.trajectories import scenario_reference
 
 SCENARIOS = ("circles", "follow_person", "wall_pass", "partial_obstacle", "static_only", "corridor", "far_people")
@@ -53,27 +54,46 @@ def result_key(config: str, rate: float | None) -> str:
 
 
 def run_scenario(name: str, seed: int, configs: list[str], duration: float | None = None,
-                 record_tracks: bool = False, rates: list[float] | None = None):
+                 record_tracks: bool = False, rates: list[float] | None = None, rig_name: str = "front"):
     """Simulate one scenario once and score every configuration on its frames.
 
     ``rates`` (Hz): each configuration also runs on the frames decimated to each rate (a frame is
     kept when its stamp reaches the next multiple of 1 / rate after the first), and is scored on
     those frames only; the results are keyed by ``result_key``. None: every frame, keyed by the
-    configuration's name."""
+    configuration's name. ``rig_name`` (sim.rig): the sensors; with another rig than ``front`` each
+    configuration also reads the rig's other cameras and its LiDAR (scanned at its rate, as in the closed
+    loop), and recall counts the people within range in any direction, in view or not."""
     sc = load_scenario(name)
     world = World(sc, seed=seed, segmentation=True)
+    mounts = rig(rig_name)
+    others = cameras(mounts)[1:]
+    if others:
+        world.add_cameras([m.yaw for m in others])
+    lidar = next(iter(lidars(mounts)), None)
+    model = None if lidar is None else lidar.lidar_model()
+    lidar_every = 1 if model is None else max(1, int(round(sc.rates.camera / model.scan_rate)))
+    co = sc.corridor
+    fence = (np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2]))
     ref = scenario_reference(sc)
     runs = [(c, r) for c in configs for r in (rates or [None])]
     pipes = {result_key(c, r): DODT(preset(c)) for c, r in runs}
-    metrics = {k: PerceptionMetrics() for k in pipes}
+    for p in pipes.values():
+        p.set_scene(geofence=fence, lidar_elevation_min=None if model is None else model.elevation_min)
+    metrics = {k: PerceptionMetrics(all_round=rig_name != "front") for k in pipes}
     tracks = {k: [] for k in pipes}
     slots: dict = {}  # per decimated run: (the first frame's stamp, the index of the next 1 / rate slot)
     truth_log = []
     frame = world.latest_frame()
     n = int(round((duration or sc.duration) * sc.rates.control))
+    n_frames = 0
     for k in range(n + 1):
         if frame is not None:
             truth = world.ground_truth()
+            extra = world.latest_extra_frames()
+            scan = None
+            if model is not None and n_frames % lidar_every == 0:
+                scan = world.lidar_scan(model, lidar.T_body_lidar(), method="panorama")
+            n_frames += 1
             for c, rate in runs:
                 key = result_key(c, rate)
                 if rate is not None:
@@ -81,6 +101,10 @@ def run_scenario(name: str, seed: int, configs: list[str], duration: float | Non
                     if frame.stamp < t0 + slot / rate - 1e-6:
                         continue
                     slots[key] = (t0, int(math.floor((frame.stamp - t0) * rate + 1e-6)) + 1)
+                if extra:
+                    pipes[key].observe_cameras(extra)
+                if scan is not None:
+                    pipes[key].observe_lidar(scan)
                 r = pipes[key].process(frame)
                 metrics[key].add(r, truth, frame.intrinsics)
                 if record_tracks:
@@ -248,7 +272,7 @@ def plot(out: Path, scenario: str, metrics: dict, tracks: dict, truth_log: list)
 
 
 def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration: float | None = None,
-        rates: list[float] | None = None) -> dict:
+        rates: list[float] | None = None, rig_name: str = "front") -> dict:
     """``rates`` (Hz): score every configuration at each of these frame rates (run_scenario), its
     rows named ``config@RATEHz``; None: at the camera's rate, rows named by configuration."""
     configs = list(configs or PRESETS)
@@ -258,7 +282,8 @@ def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration
     t0 = time.perf_counter()
     for scn in scenarios:
         for i, seed in enumerate(seeds):
-            m, tracks, truth = run_scenario(scn, seed, configs, duration, record_tracks=(i == 0), rates=rates)
+            m, tracks, truth = run_scenario(scn, seed, configs, duration, record_tracks=(i == 0), rates=rates,
+                                            rig_name=rig_name)
             for k in keys:
                 per_scn_metrics[scn][k].append(m[k])
             if i == 0:
@@ -271,7 +296,8 @@ def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration
     per_seed = {seed: {k: PerceptionMetrics.combine([per_scn_metrics[s][k][i] for s in scenarios]) for k in keys}
                 for i, seed in enumerate(seeds)}
     text = write_tables(out, overall, per_scn, per_seed) + "\n" + write_recall_by_distance(out, overall)
-    (out / "results.json").write_text(json.dumps({"seeds": seeds, "scenarios": list(scenarios), "overall": overall,
+    (out / "results.json").write_text(json.dumps({"rig": rig_name, "seeds": seeds, "scenarios": list(scenarios),
+                                                  "overall": overall,
                                                   "per_scenario": per_scn, "per_seed": per_seed}, indent=1))
     print(text)
     print(f"wrote {out}/table.md, table.csv, recall_by_distance.md/.csv, results.json and plots in "

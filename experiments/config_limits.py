@@ -385,6 +385,9 @@ LIMITS: dict[str, Limit] = {
     "dodt.lidar.max_footprint": _real(0.1, 100.0),  # m
     "dodt.lidar.structure_fraction": _FRACTION,
     "dodt.lidar.floor_tolerance": _real(0.0, 2.0),  # m
+    "dodt.lidar.vote_span": _real(0.0, 5.0, lo_open=True),  # s
+    "dodt.lidar.vote_velocity": _real(0.0, 10.0),  # m/s
+    "dodt.lidar.vote_scans": _whole(1, 20),
     "dodt.dbscan.eps": _real(0.0, 5.0, lo_open=True),  # m
     "dodt.dbscan.min_points": _whole(1, 10_000),
     "dodt.dbscan.min_size_xy": _real(0.0, 10.0),  # m

@@ -13,8 +13,8 @@ a pair counting only within ``match_distance`` (0.5 m).
   detections): dynamic reports farther than ``match_distance`` from every person, over all
   dynamic reports; a second dynamic track on a person (a duplicate) is counted apart;
 - recall: people walking (> 0.1 m/s) within 0.5-5 m of the camera and visible (at least
-  ``min_visible_px`` pixels in the segmentation, or, without segmentation, centre in view)
-  that are matched by a dynamic track, over all such people;
+  ``min_visible_px`` pixels in the segmentation, or, without segmentation, centre in view; with
+  ``all_round``, a rig's, in any direction) that are matched by a dynamic track, over all such people;
 - recall by distance: the same, counted in bins of camera distance out to 10 m (the paper's
   Fig. 10: the learned module's range extension); people beyond 5 m count when they show at
   least ``min_visible_px`` pixels (without segmentation: centre in view within 10 m);
@@ -187,6 +187,8 @@ class PerceptionMetrics:
     pred_ca: list = field(default_factory=list)  # m, constant-acceleration prediction errors
     pending: list = field(default_factory=list)  # (due stamp, person id, cv xy, ca xy), oldest first
     life: TrackLife = field(default_factory=TrackLife)
+    # recall of the people all round the sensors (a rig's), not only of those in the first camera's view
+    all_round: bool = False
 
     def _score_predictions(self, stamp: float, people: dict) -> None:
         """Scores the predictions due by ``stamp`` against ``people`` ({id: (2,) xy})."""
@@ -261,7 +263,9 @@ class PerceptionMetrics:
             dist = float(np.linalg.norm(p.center - cam[:3, 3]))
             if np.linalg.norm(p.velocity[:2]) <= 0.1 or not RECALL_BINS[0] <= dist <= RECALL_BINS[-1]:
                 continue
-            if truth.segmentation is not None:
+            if self.all_round:
+                visible = True
+            elif truth.segmentation is not None:
                 visible = int(np.count_nonzero(truth.segmentation == p.id)) >= self.min_visible_px
             else:
                 visible = bool(in_field_of_view(p.center[None], cam, K, RECALL_BINS[-1])[0])

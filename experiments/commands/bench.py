@@ -8,6 +8,7 @@ from pathlib import Path
 
 from sim.scenario import RENDERER_CHOICES, load_scenario
 
+from experiments.config_limits import RIG_NAMES
 from experiments.commands.common import (RENDERER_HELP, LazyText, UserError, add_command, dodt_presets, examples,
                                          output_folder, seconds, whole, writable_file)
 
@@ -29,6 +30,7 @@ APPLIES_TO = {
     "--json": ("sim", "runtime", "planner"),
     "--renderer": ("loop",),
     "--people": ("planner",),
+    "--rig": ("perception",),
 }
 # The value of an option that was not given, where it has one (the rest: None, --quick False).
 DEFAULTS = {"--scenario": "corridor", "--seconds": 10.0, "--out": "runs/bench_perception", "--config": "dodt",
@@ -78,6 +80,9 @@ def add_parser(sub) -> None:
     opt("--renderer", RENDERER_HELP, choices=RENDERER_CHOICES)
     opt("--people", "only the time per plan against these numbers of people in range (comma list, "
                     "e.g. 10,50,200)", type=_counts, metavar="N,...")
+    opt("--rig", "perception: the drone's sensors (front, the default; front_back, surround4, lidar): every "
+                 "configuration reads them all, and recall counts the people all round, in view or not",
+        choices=RIG_NAMES)
 
 
 def _counts(text: str) -> tuple[int, ...]:
@@ -139,7 +144,8 @@ def cmd_bench(args) -> int:
         output_folder(args.out)
         duration = args.duration if args.duration else (6.0 if args.quick else None)
         rates = parse_rates(args.rates) if args.rates else None
-        bench_perception.run(Path(args.out), list(range(args.seeds or 1)), scenarios, configs, duration, rates=rates)
+        bench_perception.run(Path(args.out), list(range(args.seeds or 1)), scenarios, configs, duration, rates=rates,
+                             rig_name=args.rig or "front")
         return 0
     if args.what == "planner":
         from experiments import bench_planner

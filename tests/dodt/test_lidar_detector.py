@@ -23,12 +23,15 @@ def make_scan(points_world, sensor=(0.0, 0.0, SENSOR_Z)) -> LidarScan:
                      elevation=np.arcsin(q[:, 2] / r).astype(np.float32), stamp=0.0, T_world_sensor=T, n_rays=len(q))
 
 
-def column(xy, z_lo, z_hi, radius=0.2, step=0.05):
-    """Points on a vertical cylinder's surface (a person-sized column)."""
+def column(xy, z_lo, z_hi, radius=0.2, step=0.05, facing=None):
+    """Points on a vertical cylinder's surface (a person-sized column); ``facing`` (x, y): only the half
+    that faces that point (what a sensor there sees)."""
     pts = []
+    toward = None if facing is None else np.arctan2(facing[1] - xy[1], facing[0] - xy[0])
     for z in np.arange(z_lo, z_hi, step):
         for a in np.linspace(0, 2 * np.pi, 24, endpoint=False):
-            pts.append((xy[0] + radius * np.cos(a), xy[1] + radius * np.sin(a), z))
+            if toward is None or np.cos(a - toward) > 0:
+                pts.append((xy[0] + radius * np.cos(a), xy[1] + radius * np.sin(a), z))
     return np.array(pts)
 
 

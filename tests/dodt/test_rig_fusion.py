@@ -30,7 +30,8 @@ def run(dodt, n, behind_xy, ahead_box=None, lidar_every=3, camera_yaws=()):
         if camera_yaws:
             dodt.observe_cameras([frame(t, k, boxes + [person_box(xy)], yaw) for yaw in camera_yaws])
         if lidar_every and k % lidar_every == 0:
-            dodt.observe_lidar(make_scan(np.concatenate([column(xy, 1.0, 1.75), floor()]), sensor=(0.0, 0.0, 1.3)))
+            dodt.observe_lidar(make_scan(np.concatenate([column(xy, 1.0, 1.75, facing=(0.0, 0.0)), floor()]),
+                                         sensor=(0.0, 0.0, 1.3)))
         res = dodt.process(frame(t, k, boxes))
     return res
 
