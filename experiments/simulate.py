@@ -25,13 +25,20 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from experiments.sequences import TumWriter
+from experiments.pcd import write_scan
+from experiments.sequences import TumWriter, matrix_to_quaternion
 from sim import World, load_scenario
+from sim.gl_renderer import GLUnavailable
+from sim.rig import lidars, rig
 from sim.trajectories import scenario_reference
 
 
 def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | None = None,
-             save_every: int = 1, renderer: str | None = None, segmentation: bool = True, fmt: str = "dodt") -> dict:
+             save_every: int = 1, renderer: str | None = None, segmentation: bool = True, fmt: str = "dodt",
+             lidar: bool = False) -> dict:
+    """``lidar``: also a Mid-360-like LiDAR on top of the body (sim.rig's ``lidar`` rig), scanned at its rate
+    and written as PCD files (lidar/NNNNNN.pcd, binary, the sensor frame with the scan's pose as the
+    VIEWPOINT) with lidar.txt: one line 'stamp tx ty tz qx qy qz qw file' per scan (the pose from odometry)."""
     if fmt not in ("dodt", "tum"):
         raise ValueError(f"unknown output format {fmt!r}; known: dodt, tum")
     sc = load_scenario(scenario_name)
@@ -45,9 +52,12 @@ def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | 
     tum = TumWriter(out, world.intrinsics) if fmt == "tum" else None
     ref_at = scenario_reference(sc)
     sensor_frames, truth_frames = [], []
+    scans = LidarWriter(out, sc.rates.camera) if lidar else None
     frame = world.latest_frame()
     n_steps = int(round(duration / (world.dt * world.steps_per_control)))
     for k in range(n_steps + 1):
+        if scans is not None and frame is not None:
+            scans.add(world, frame.seq)
         if frame is not None and frame.seq % save_every == 0:
             truth = world.ground_truth()
             if tum is not None:
@@ -61,6 +71,8 @@ def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | 
     wall = time.perf_counter() - t_wall
     st = world.state()
     K = world.intrinsics
+    if scans is not None:
+        scans.close()
     if tum is not None:
         tum.close()
     else:
@@ -71,6 +83,7 @@ def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | 
     summary = {
         "scenario": sc.name, "source": sc.source, "seed": seed, "sim_time": round(world.time, 4),
         "format": fmt, "frames_saved": len(truth_frames), "renderer": world.renderer,
+        "lidar_scans_saved": 0 if scans is None else scans.count,
         "collided": world.collided, "collision_count": len(world.collisions),
         "min_clearance": {k: round(v, 4) for k, v in world.min_clearance.items()},
         "final_position": np.round(st.position, 4).tolist(),
@@ -79,6 +92,37 @@ def simulate(scenario_name: str, seed: int | None, out: Path, duration: float | 
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     world.close()
     return summary
+
+
+class LidarWriter:
+    """The scans of a LiDAR on top of the body, one every camera_rate / scan_rate camera frames."""
+
+    def __init__(self, out: Path, camera_rate: float):
+        mount = lidars(rig("lidar"))[0]
+        self.model, self.T_body = mount.lidar_model(), mount.T_body_lidar()
+        self.every = max(1, int(round(camera_rate / self.model.scan_rate)))
+        self.dir = out / "lidar"
+        self.dir.mkdir(exist_ok=True)
+        self.lines = ["# stamp tx ty tz qx qy qz qw file (the LiDAR's pose from odometry; points in its frame)"]
+        self.count = 0
+        self.out = out
+
+    def add(self, world, seq: int) -> None:
+        if seq % self.every:
+            return
+        try:
+            scan = world.lidar_scan(self.model, self.T_body, method="panorama")
+        except GLUnavailable:
+            scan = world.lidar_scan(self.model, self.T_body, method="rays")
+        name = f"lidar/{self.count:06d}.pcd"
+        write_scan(self.out / name, scan)
+        T = scan.T_world_sensor
+        q = matrix_to_quaternion(T[:3, :3])  # x, y, z, w
+        self.lines.append(f"{scan.stamp:.6f} " + " ".join(f"{v:.6f}" for v in (*T[:3, 3], *q)) + f" {name}")
+        self.count += 1
+
+    def close(self) -> None:
+        (self.out / "lidar.txt").write_text("\n".join(self.lines) + "\n")
 
 
 def _save_frame(out: Path, frame, truth, sensor_frames: list, truth_frames: list) -> None:

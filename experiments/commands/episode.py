@@ -62,6 +62,10 @@ def add_parser(sub) -> None:
     s.add_argument("--format", choices=("dodt", "tum"), default="dodt",
                    help="dodt (default: depth/, color/, sensor.json) or tum (a TUM RGB-D sequence: rgb/, depth/, "
                         "rgb.txt, depth.txt, groundtruth.txt, intrinsics.json), with the ground truth beside")
+    s.add_argument("--lidar", action="store_true",
+                   help="also a Mid-360-like LiDAR on top of the drone (the lidar rig's), scanned at 10 Hz: "
+                        "lidar/NNNNNN.pcd (binary PCD, the sensor frame, the scan's pose as VIEWPOINT; PCL and Open3D "
+                        "read it) and lidar.txt (stamp, pose from odometry and file of each scan)")
 
 
 def add_perceive_parser(sub) -> None:
@@ -94,9 +98,11 @@ def cmd_simulate(args) -> int:
     load_scenario(args.scenario)  # refused before the output folder is made
     output_folder(args.out)
     s = simulate(args.scenario, args.seed, Path(args.out), duration=args.duration, save_every=args.save_every,
-                 renderer=args.renderer, segmentation=not args.no_segmentation, fmt=args.format)
+                 renderer=args.renderer, segmentation=not args.no_segmentation, fmt=args.format, lidar=args.lidar)
     print(f"{s['scenario']} seed {s['seed']}: {s['sim_time']:.2f} s simulated in {s['wall_time_s']:.1f} s "
-          f"({s['renderer']} renderer), {s['frames_saved']} frames written to {args.out}")
+          f"({s['renderer']} renderer), {s['frames_saved']} frames"
+          + (f" and {s['lidar_scans_saved']} LiDAR scans (lidar/*.pcd, lidar.txt)" if args.lidar else "")
+          + f" written to {args.out}")
     print(f"collisions: {s['collision_count']}, min clearance [m]: " +
           ", ".join(f"{k} {v:.2f}" for k, v in s["min_clearance"].items()) +
           f", final position {s['final_position']}")

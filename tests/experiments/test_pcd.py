@@ -6,6 +6,8 @@ import pytest
 
 from dodt.frames import LidarScan
 from experiments.pcd import PCDError, read_pcd, read_points, viewpoint_of, write_pcd, write_scan
+from experiments.sequences import quaternion_to_matrix
+from experiments.simulate import simulate
 
 
 def _points(n=500, seed=0):
@@ -61,3 +63,20 @@ def test_files_it_cannot_read_are_refused_by_name(tmp_path):
     short.write_bytes(short.read_bytes()[:-5])
     with pytest.raises(PCDError, match="10 points announced"):
         read_pcd(short)
+
+
+def test_simulate_writes_the_lidar_scans_with_their_poses(tmp_path):
+    s = simulate("crossing", 0, tmp_path, duration=0.5, save_every=15, segmentation=False, lidar=True)
+    lines = [ln.split() for ln in (tmp_path / "lidar.txt").read_text().splitlines() if not ln.startswith("#")]
+    assert s["lidar_scans_saved"] == len(lines) == 6  # 10 Hz over 0.5 s, the first at 0
+    stamps = [float(ln[0]) for ln in lines]
+    assert np.allclose(np.diff(stamps), 0.1)
+    first = read_pcd(tmp_path / lines[0][8])
+    pts = read_points(tmp_path / lines[0][8])
+    assert len(pts) > 5000
+    # the viewpoint is the pose of lidar.txt; points in the sensor frame: the floor lies 1.32 m below it
+    vp = [float(v) for v in first[1]["VIEWPOINT"]]
+    assert np.allclose(vp[:3], [float(v) for v in lines[0][1:4]], atol=1e-5)
+    R = quaternion_to_matrix(np.array([float(v) for v in lines[0][4:8]]))
+    world_z = pts @ R.T[:, 2] + float(lines[0][3])
+    assert np.min(world_z) == pytest.approx(0.0, abs=0.1)
