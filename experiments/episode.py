@@ -119,7 +119,8 @@ def run_episode(scenario, seed: int | None = None, perception="dodt", planner: s
     ``cfg``); the summary's ``config`` records them and the full values of every section used.
     on_frame(view): optional callback per camera frame (live viewers); view is a dict with t, frame
     (SensorFrame), truth (GroundTruth), perception (PerceptionOutput), map (VoxelMap), trajectory
-    (the current plan or None), T_world_body (4x4), path (the planner's global path or None).
+    (the current plan or None), T_world_body (4x4), path (the planner's global path or None), lidar (the
+    latest LiDAR scan's returns in the world frame, (N, 3), or None).
     renderer: overrides ``cfg.renderer``. Frames carry colour only when the perception module reads it
     (its ``uses_color``) or ``on_frame`` is given.
     """
@@ -287,6 +288,7 @@ class _Loop:
             max(1, int(round(self.sc.rates.camera / self.lidar.rate)))
         self.lidar_method = "panorama"
         self.map_scan = None  # the latest scan not yet in the map
+        self.scan_world = None  # the latest scan's returns in the world frame (viewers)
 
     def _scan(self):
         """A LiDAR scan now: the depth panorama (sim.lidar_panorama), or cast rays without OpenGL."""
@@ -327,6 +329,8 @@ class _Loop:
         if scan is not None:
             self.perception.observe("observe_lidar", scan, frame.stamp)
             self.map_scan = scan  # for the map's next update
+            self.scan_world = scan.points_world()
+            self.rec.lidar(scan.stamp, self.scan_world)
         po = self.perception.update(frame, truth if self.truth_for_perception else None)
         perc_ms = (time.perf_counter() - t0 - (self.timer.seconds - c0)) * 1e3
         if po.skipped is None:
@@ -351,6 +355,7 @@ class _Loop:
         if self.on_frame is not None:
             self.on_frame({"t": frame.stamp, "frame": frame, "truth": truth, "perception": po, "map": vmap,
                            "trajectory": self.follower.trajectory, "T_world_body": truth.T_world_body,
+                           "lidar": self.scan_world,
                            "path": planner_telemetry(self.raw_planner).get("path")})
 
     def _plan(self, t: float, st, ctx: EpisodeContext) -> None:

@@ -19,6 +19,8 @@ Record kinds (field ``k``):
   occupied then and not now (the first record adds them all); ``map_snapshots`` rebuilds the full sets.
   Centre = map_origin + (index + 0.5) * map_resolution. (Logs written before 2026-11-27 hold the full
   set in every record, as voxels; ``map_snapshots`` reads both.)
+- ``lidar`` (with a LiDAR in the rig, every ``map_snapshot_period``): t, pts: a scan's returns in the
+  world frame, decimated to at most 1,500 points, rounded to the centimetre.
 - ``collision``: t, kind (person | static | structure), other_id, position (the drone's), v (the
   drone's velocity), point (the point of the other body nearest the drone), other_v (the other
   body's velocity): what experiments.fault classes the collision by.

@@ -15,6 +15,7 @@ from planner.types import Trajectory
 
 CLEARANCE_CAP = 9.0  # m: clearances in the ``s`` records are capped here (farther is "far")
 ABOVE_FLOOR = 0.1  # m: map snapshots keep the occupied voxels from this height up
+LIDAR_POINTS = 1500  # points of a LiDAR scan kept in a ``lidar`` record
 
 
 class EpisodeRecorder:
@@ -24,6 +25,7 @@ class EpisodeRecorder:
         self.map_changes_stop = map_changes_stop  # a map known from the start never changes: one snapshot
         self._changes = MapChanges()
         self._next_snapshot = 0.0
+        self._next_lidar = 0.0
         self._collisions = 0
 
     def header(self, **fields) -> None:
@@ -47,6 +49,15 @@ class EpisodeRecorder:
         above_floor = idx[:, 2] * vmap.cfg.resolution + vmap.cfg.origin[2] >= ABOVE_FLOOR
         self.log.add(self._changes.record(round(t, 4), idx[above_floor]))
         self._next_snapshot = math.inf if self.map_changes_stop else t + self.snapshot_period
+
+    def lidar(self, t: float, points_world: np.ndarray) -> None:
+        """A ``lidar`` record (a scan's world points, decimated to LIDAR_POINTS, cm) at most once per
+        snapshot period: what the HTML replay shows of the LiDAR."""
+        if t < self._next_lidar:
+            return
+        step = max(1, -(-len(points_world) // LIDAR_POINTS))
+        self.log.add({"k": "lidar", "t": round(t, 4), "pts": np.round(points_world[::step], 2).tolist()})
+        self._next_lidar = t + self.snapshot_period
 
     def plan(self, t: float, traj: Trajectory, n_obstacles: int, telemetry: dict) -> None:
         path = telemetry.get("path")

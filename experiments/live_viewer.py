@@ -59,7 +59,7 @@ class LiveViewer:
         if not quiet:
             print(f"meshcat viewer: {self.url}", flush=True)
         self.corridor, self.goal, self.max_points = corridor, goal, max_points
-        self.period = {"lines": 1.0 / lines_hz, "cloud": 1.0 / cloud_hz, "map": 1.0 / map_hz}
+        self.period = {"lines": 1.0 / lines_hz, "cloud": 1.0 / cloud_hz, "lidar": 1.0 / cloud_hz, "map": 1.0 / map_hz}
         self.failed: str | None = None
         self._reset()
 
@@ -114,6 +114,9 @@ class LiveViewer:
         if view.get("frame") is not None and self._due("cloud", t):
             pts = self.cloud(view["frame"], self.max_points)
             draw_points(vis["cloud"], pts, np.tile(unit_rgb(CLOUD)[:, None], (1, len(pts))), 0.03)
+        if view.get("lidar") is not None and self._due("lidar", t):
+            pts = np.asarray(view["lidar"])[::max(1, -(-len(view["lidar"]) // self.max_points))]
+            draw_points(vis["lidar"], pts, height_colors(pts[:, 2], 3.0), 0.03)
         if view.get("map") is not None and self._due("map", t):
             vmap = view["map"]
             res = float(vmap.cfg.resolution)

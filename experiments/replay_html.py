@@ -151,6 +151,10 @@ def _replay_scene(vis, records: list[dict], frames: list[dict]) -> None:
     if paths:
         path = np.asarray(paths[-1], float)
         draw_line(vis["global_path"], np.c_[path[:, :2], np.full(len(path), 0.05)], GLOBAL_PATH)
+    scans = [r["pts"] for r in records if r["k"] == "lidar" and r["pts"]]
+    if scans:  # the LiDAR's last recorded scan (a still: meshcat animates poses, not clouds)
+        pts = np.asarray(scans[-1], float)
+        draw_points(vis["lidar"], pts, height_colors(pts[:, 2], corridor["height"]), 0.03)
     snaps = map_snapshots(records)
     if snaps and len(snaps[-1][1]):
         res = float(header["map_resolution"])

@@ -13,6 +13,7 @@ from PIL import Image
 
 from dodt.frames import CameraIntrinsics, SensorFrame
 from experiments.episode import EpisodeConfig, run_episode
+from experiments.episode_log import read_log
 from experiments.live_viewer import LiveViewer
 from experiments.meshcat_scene import DRONE_RGB, FLOOR_RGB
 from experiments.meshcat_server import start_meshcat_server, stop_meshcat_server
@@ -270,3 +271,12 @@ def test_live_viewer_uses_a_running_server_and_leaves_it_running():
             LiveViewer(zmq_url="tcp://127.0.0.1:1", quiet=True, timeout=0.3)
     finally:
         stop_meshcat_server(proc)
+
+
+def test_a_lidar_rigs_replay_shows_its_last_scan(tmp_path):
+    run_episode("corridor", seed=0, perception="oracle", out=tmp_path, cfg=EpisodeConfig(duration=1.0, rig="lidar"))
+    records = [r for r in read_log(tmp_path / "log.jsonl.gz") if r["k"] == "lidar"]
+    assert len(records) == 1 and 500 < len(records[0]["pts"]) <= 1500  # one per second, decimated
+    html = build_replay_html(tmp_path / "log.jsonl.gz", tmp_path / "replay.html").read_text(encoding="utf-8")
+    cmds = [c for c in _commands(html) if c["path"] == "/meshcat/lidar"]
+    assert cmds and cmds[0]["object"]["object"]["type"] == "Points"
