@@ -3,7 +3,7 @@
 For each collision: the drone's horizontal speed, who closed the gap (the drone's and, for a person,
 the person's velocity along the line between them: positive = moving toward the other), and, over the
 ``window`` seconds before it, the fraction of camera frames in which the person was inside the
-camera's horizontal view within ``view_range``, tracked by perception (a reported box centre within
+horizontal view of a camera of the rig (or anywhere, with a LiDAR) within ``view_range``, tracked by perception (a reported box centre within
 ``match`` metres) and reported as a moving obstacle. A person hit from outside the view was never
 seen coming; one seen and reported moving points at the planner. ``person_min_speed``: the person's
 lowest speed over the window (a walker standing, or slowing to turn, before walking into the drone).
@@ -46,6 +46,14 @@ def _centre(person: dict) -> np.ndarray:
     return (np.asarray(person["lo"], float) + np.asarray(person["hi"], float)) / 2
 
 
+def logged_views(header: dict) -> tuple[list[float], bool]:
+    """(each camera's heading on the body [rad], whether a LiDAR sees all round) of the logged rig; a log
+    without its sensors (written before 2026-11-28) was flown with the forward camera alone."""
+    sensors = header.get("sensors") or [{"kind": "rgbd", "yaw": 0.0}]
+    yaws = [math.radians(float(s.get("yaw", 0.0))) for s in sensors if s.get("kind") != "lidar"]
+    return yaws or [0.0], any(s.get("kind") == "lidar" for s in sensors)
+
+
 def _heading(frame: dict) -> float:
     """The camera's heading (rad) in a frame record: the body's x axis."""
     fwd = np.asarray(frame["R"], float).reshape(3, 3)[:2, 0]
@@ -59,6 +67,7 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
     header = records[0]
     if half_fov is None:
         half_fov = logged_half_view(header)
+    yaws, all_round = logged_views(header)
     states = [r for r in records if r["k"] == "s"]
     frames = [r for r in records if r["k"] == "f"]
     plans = [r for r in records if r["k"] == "plan" and "threats" in r]
@@ -85,8 +94,9 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                 where.append((f["t"], centre))
                 speeds.append(float(np.hypot(*np.asarray(person["v"], float)[:2])))
                 d = centre - np.asarray(f["p"], float)[:2]
-                bearing = abs(wrap_angle(math.atan2(d[1], d[0]) - _heading(f)))
-                seen.append(bearing <= half_fov and float(np.hypot(*d)) <= view_range)
+                bearing = math.atan2(d[1], d[0]) - _heading(f)
+                seen.append((all_round or any(abs(wrap_angle(bearing - y)) <= half_fov for y in yaws))
+                            and float(np.hypot(*d)) <= view_range)
                 near = [tr for tr in f["tracks"] if float(np.hypot(*(np.asarray(tr["center"][:2]) - centre))) <= match]
                 tracked.append(bool(near))
                 moving.append(any(tr.get("dynamic") for tr in near))

@@ -18,6 +18,7 @@ start-up are timed apart from the loop, whose real-time factor the summary repor
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -71,6 +72,12 @@ def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePredictio
         v = o.velocity + o.acceleration * min(lag, o.accel_horizon)
         out.append(replace(o, center=c, velocity=v, position_std=float(o.std_at(np.array([lag]))[0])))
     return tuple(out)
+
+
+def sensor_yaw(sensor) -> float:
+    """The heading [rad] of a sensor's forward axis on the body: a camera's optical axis, a LiDAR's x axis."""
+    axis = sensor.T_body_sensor[:3, 2] if isinstance(sensor, CameraSensor) else sensor.T_body_sensor[:3, 0]
+    return math.atan2(axis[1], axis[0])
 
 
 def rig_sensors(sc, world: World, mounts: tuple[SensorMount, ...]) -> tuple:
@@ -305,7 +312,7 @@ class _Loop:
         self.rec.header(
             scenario=sc.name, source=sc.source, seed=self.seed, perception=self.labels["perception"],
             planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map, rig=cfg.rig,
-            sensors=[{"name": s.name, "kind": s.kind} for s in ctx.sensors],
+            sensors=[{"name": s.name, "kind": s.kind, "yaw": round(math.degrees(sensor_yaw(s)), 3)} for s in ctx.sensors],
             frame_latency=cfg.frame_latency,
             rates={"control": ctx.rates.control, "camera": sc.rates.camera, "plan": cfg.plan_rate, "map": ctx.rates.map},
             corridor={"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},

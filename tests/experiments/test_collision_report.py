@@ -1,4 +1,5 @@
 """experiments.collision_report and `dodt-nav collisions`: rows computed from hand-made episode records."""
+import math
 import gzip
 import json
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from experiments.cli import main
-from experiments.collision_report import collision_rows, logged_half_view
+from experiments.collision_report import collision_rows, logged_half_view, logged_views
 
 EYE = np.eye(3).ravel().tolist()  # heading +x
 
@@ -133,3 +134,10 @@ def test_cli_prints_a_table_and_names_a_folder_without_logs(tmp_path, capsys):
     assert out[0].startswith("| seed | t | kind") and len(out) == 4  # header, rule, two collisions
     assert main(["collisions", str(tmp_path / "empty")]) == 2
     assert "no episode log" in capsys.readouterr().err
+
+
+def test_the_view_a_collision_is_judged_in_is_the_logged_rigs():
+    assert logged_views({}) == ([0.0], False)  # a log from before rigs: the forward camera
+    yaws, all_round = logged_views({"sensors": [{"kind": "rgbd", "yaw": 0.0}, {"kind": "rgbd", "yaw": 180.0}]})
+    assert yaws == [0.0, pytest.approx(math.pi)] and not all_round
+    assert logged_views({"sensors": [{"kind": "rgbd", "yaw": 0.0}, {"kind": "lidar", "yaw": 0.0}]}) == ([0.0], True)
