@@ -53,6 +53,12 @@ def result_key(config: str, rate: float | None) -> str:
     return config if rate is None else f"{config}@{rate:g}Hz"
 
 
+def corridor_fence(sc) -> tuple[np.ndarray, np.ndarray]:
+    """The scenario's corridor as a geofence ((x, y) low, (x, y) high), as the closed loop's context has it."""
+    co = sc.corridor
+    return np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2])
+
+
 def run_scenario(name: str, seed: int, configs: list[str], duration: float | None = None,
                  record_tracks: bool = False, rates: list[float] | None = None, rig_name: str = "front"):
     """Simulate one scenario once and score every configuration on its frames.
@@ -72,8 +78,7 @@ def run_scenario(name: str, seed: int, configs: list[str], duration: float | Non
     lidar = next(iter(lidars(mounts)), None)
     model = None if lidar is None else lidar.lidar_model()
     lidar_every = 1 if model is None else max(1, int(round(sc.rates.camera / model.scan_rate)))
-    co = sc.corridor
-    fence = (np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2]))
+    fence = corridor_fence(sc)
     ref = scenario_reference(sc)
     runs = [(c, r) for c in configs for r in (rates or [None])]
     pipes = {result_key(c, r): DODT(preset(c)) for c, r in runs}
@@ -308,45 +313,79 @@ def run(out: Path, seeds: list[int], scenarios=SCENARIOS, configs=None, duration
 # --------------------------------------------------------------------------- runtime (Table II)
 
 
-def record_frames(scenario: str = "corridor", seconds: float = 6.0, seed: int = 0) -> list:
+def record_frames(scenario: str = "corridor", seconds: float = 6.0, seed: int = 0, rig_name: str = "front") -> list:
+    """The first camera's frames of a flight along the scenario's reference; with another rig than ``front``,
+    each as (frame, the other cameras' frames, the LiDAR's scan taken with it or None)."""
     sc = load_scenario(scenario)
     world = World(sc, seed=seed, segmentation=False)
+    mounts = rig(rig_name)
+    if cameras(mounts)[1:]:
+        world.add_cameras([m.yaw for m in cameras(mounts)[1:]])
+    lidar = next(iter(lidars(mounts)), None)
+    model = None if lidar is None else lidar.lidar_model()
+    every = 1 if model is None else max(1, int(round(sc.rates.camera / model.scan_rate)))
     ref = scenario_reference(sc)
-    frames = [world.latest_frame()]
-    while world.time < seconds:
-        f = world.step(ref(world.time))
-        if f is not None:
+    frames = []
+    f = world.latest_frame()
+    while True:
+        if rig_name == "front":
             frames.append(f)
+        else:
+            scan = None if model is None or len(frames) % every else \
+                world.lidar_scan(model, lidar.T_body_lidar(), method="panorama")
+            frames.append((f, world.latest_extra_frames(), scan))
+        if world.time >= seconds:
+            break
+        f = None
+        while f is None:
+            f = world.step(ref(world.time))
     world.close()
     return frames
 
 
 def run_runtime(config: str = "dodt", scenario: str = "corridor", seconds: float = 6.0, repeats: int = 3,
-                json_out: Path | None = None) -> dict:
+                json_out: Path | None = None, rig_name: str = "front") -> dict:
+    """Per-module times of one configuration; with another rig than ``front``, on the rig's sensors (the
+    ``lidar`` module's figures over the frames a scan joined)."""
     import cv2
 
     cv2.setNumThreads(1)  # single-threaded, as the paper's table
-    frames = record_frames(scenario, seconds)
+    recorded = record_frames(scenario, seconds, rig_name=rig_name)
+    rigged = rig_name != "front"
+    frames = [r[0] for r in recorded] if rigged else recorded
     per = {m: [] for m in MODULES + ("total",)}
+    sc = load_scenario(scenario)
+    model = next((m.lidar_model() for m in lidars(rig(rig_name))), None)
     for rep in range(repeats + 1):
         pipe = DODT(preset(config))
-        for f in frames:
+        pipe.set_scene(geofence=corridor_fence(sc), lidar_elevation_min=None if model is None else model.elevation_min)
+        for item in recorded:
+            f = item
+            if rigged:
+                f, extra, scan = item
+                if extra:
+                    pipe.observe_cameras(extra)
+                if scan is not None:
+                    pipe.observe_lidar(scan)
             r = pipe.process(f)
             if rep > 0:  # the first pass compiles and warms up
                 for m in per:
-                    per[m].append(r.timings_ms[m])
+                    if m != "lidar" or not rigged or item[2] is not None:
+                        per[m].append(r.timings_ms[m])
     res = {m: {"median_ms": float(np.median(v)), "p95_ms": float(np.percentile(v, 95))} for m, v in per.items()}
     K = frames[0].intrinsics
     print(f"Runtime of '{config}' per frame, {K.width}x{K.height}, one thread, {len(frames)} frames of {scenario} "
-          f"x {repeats} passes")
+          f"x {repeats} passes, rig {rig_name}")
     print(f"| {'module':<22} | {'median (ms)':>11} | {'p95 (ms)':>8} | {'paper, Intel NUC (ms)':>21} |")
     print(f"|{'-' * 24}|{'-' * 13}|{'-' * 10}|{'-' * 23}|")
     names = {"point_cloud": "point cloud + voxel", "udepth": "U-depth detection", "dbscan": "DBSCAN detection",
              "ensemble": "ensemble fusion", "association": "data association", "kalman": "Kalman filter tracking",
-             "learned": "YOLO-MAD detection", "identification": "dynamic obstacle id.", "total": "total"}
+             "learned": "YOLO-MAD detection", "identification": "dynamic obstacle id.", "total": "total",
+             "other_cameras": "other cameras' detectors", "lidar": "LiDAR detection, fusion"}
+    uses = {"other_cameras": bool(cameras(rig(rig_name))[1:]), "lidar": bool(lidars(rig(rig_name)))}
     learned_on = preset(config).learned.enabled
     for m in MODULES + ("total",):
-        if m == "learned" and not learned_on:
+        if (m == "learned" and not learned_on) or not uses.get(m, True):
             continue
         paper = PAPER_TABLE_II.get(m)
         if m == "total":

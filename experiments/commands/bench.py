@@ -30,7 +30,7 @@ APPLIES_TO = {
     "--json": ("sim", "runtime", "planner"),
     "--renderer": ("loop",),
     "--people": ("planner",),
-    "--rig": ("perception",),
+    "--rig": ("perception", "runtime"),
 }
 # The value of an option that was not given, where it has one (the rest: None, --quick False).
 DEFAULTS = {"--scenario": "corridor", "--seconds": 10.0, "--out": "runs/bench_perception", "--config": "dodt",
@@ -80,8 +80,9 @@ def add_parser(sub) -> None:
     opt("--renderer", RENDERER_HELP, choices=RENDERER_CHOICES)
     opt("--people", "only the time per plan against these numbers of people in range (comma list, "
                     "e.g. 10,50,200)", type=_counts, metavar="N,...")
-    opt("--rig", "perception: the drone's sensors (front, the default; front_back, surround4, lidar): every "
-                 "configuration reads them all, and recall counts the people all round, in view or not",
+    opt("--rig", "perception, runtime: the drone's sensors (front, the default; front_back, surround4, lidar): "
+                 "every configuration reads them all (perception: recall counts the people all round, in view or "
+                 "not; runtime: the other cameras' and the LiDAR's modules are timed too)",
         choices=RIG_NAMES)
 
 
@@ -185,5 +186,5 @@ def cmd_bench(args) -> int:
 
     load_scenario(args.scenario)
     bench_perception.run_runtime(args.config, args.scenario, seconds=args.seconds,
-                                 json_out=args.json)
+                                 json_out=args.json, rig_name=args.rig or "front")
     return 0

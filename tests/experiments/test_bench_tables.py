@@ -2,8 +2,9 @@
 import csv
 
 import numpy as np
+import pytest
 
-from experiments.bench_perception import write_tables
+from experiments.bench_perception import record_frames, run_runtime, write_tables
 from experiments.perception_metrics import PerceptionMetrics
 
 
@@ -59,3 +60,13 @@ def test_prediction_errors_are_a_line_of_the_table_and_columns_of_the_csv(tmp_pa
     assert "with the filter's acceleration held: dodt 0.30 / 0.60." in text
     row = next(csv.DictReader(open(tmp_path / "table.csv")))
     assert (float(row["pred_err_cv_m"]), float(row["pred_err_ca_m"])) == (0.3, 0.6)
+
+
+def test_runtime_on_a_lidar_rig_times_the_lidar_on_the_frames_a_scan_joined(capsys):
+
+    rec = record_frames("corridor", 0.5, rig_name="lidar")
+    assert all(len(r) == 3 for r in rec) and [r[2] is not None for r in rec[:6]] == [True, False, False] * 2
+    res = run_runtime("dodt", "corridor", seconds=0.5, repeats=1, rig_name="lidar")
+    assert res["lidar"]["median_ms"] > 0.0
+    out = capsys.readouterr().out
+    assert "LiDAR detection, fusion" in out and "other cameras" not in out
