@@ -30,7 +30,7 @@ APPLIES_TO = {
     "--json": ("sim", "runtime", "planner"),
     "--renderer": ("loop",),
     "--people": ("planner",),
-    "--rig": ("perception", "runtime"),
+    "--rig": ("perception", "runtime", "loop"),
 }
 # The value of an option that was not given, where it has one (the rest: None, --quick False).
 DEFAULTS = {"--scenario": "corridor", "--seconds": 10.0, "--out": "runs/bench_perception", "--config": "dodt",
@@ -80,7 +80,7 @@ def add_parser(sub) -> None:
     opt("--renderer", RENDERER_HELP, choices=RENDERER_CHOICES)
     opt("--people", "only the time per plan against these numbers of people in range (comma list, "
                     "e.g. 10,50,200)", type=_counts, metavar="N,...")
-    opt("--rig", "perception, runtime: the drone's sensors (front, the default; front_back, surround4, lidar): "
+    opt("--rig", "perception, runtime, loop: the drone's sensors (front, the default; front_back, surround4, lidar): "
                  "every configuration reads them all (perception: recall counts the people all round, in view or "
                  "not; runtime: the other cameras' and the LiDAR's modules are timed too)",
         choices=RIG_NAMES)
@@ -171,12 +171,13 @@ def cmd_bench(args) -> int:
         sc = load_scenario(args.scenario)
         runs = []
         for _ in range(3):  # the same episode three times: the median real-time factor is quoted
-            runs.append(run_episode(sc, seed=0, perception=args.config, cfg=EpisodeConfig(duration=args.seconds),
-                                    renderer=args.renderer))
+            runs.append(run_episode(sc, seed=0, perception=args.config, renderer=args.renderer,
+                                    cfg=EpisodeConfig(duration=args.seconds, rig=args.rig or "front")))
         rtf = [s["timing"]["real_time_factor"] for s in runs]
         s = sorted(runs, key=lambda r: r["timing"]["real_time_factor"])[1]
         tm = s["timing"]
-        print(f"closed loop, {sc.name} seed 0, perception {args.config}, frame latency {s['frame_latency']}: "
+        print(f"closed loop, {sc.name} seed 0, perception {args.config}, rig {s['rig']}, frame latency "
+              f"{s['frame_latency']}: "
               f"{s['sim_time']:.1f} s simulated; real-time factor median {tm['real_time_factor']}x of "
               f"{', '.join(f'{x}x' for x in rtf)} ({tm['renderer']} renderer)")
         for k in ("perception_ms", "map_update_ms", "planner_solve_ms"):

@@ -157,7 +157,7 @@ BENCH_MISFITS = [
     ("runtime", ["--frames", "5"], "sim"),
     ("perception", ["--json", "OUT.json"], "sim, runtime, planner"),
     ("sim", ["--renderer", "tiny"], "loop"),
-    ("sim", ["--rig", "lidar"], "perception, runtime"),
+    ("sim", ["--rig", "lidar"], "perception, runtime, loop"),
 ]
 
 
