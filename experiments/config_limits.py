@@ -201,7 +201,7 @@ LIMITS: dict[str, Limit] = {
     "episode.map_snapshot_period": _real(0.01, 3600.0),  # s
     "episode.duration": _real(0.0, 3600.0, lo_open=True, optional=True),  # s, as experiments.config.check
     "episode.static_map": _one_of(*STATIC_MAPS),
-    "episode.rig": _one_of(*RIG_NAMES),
+    "episode.rig": _one_of(*RIG_NAMES, optional=True),
     "episode.frame_latency": _whole(0, MAX_FRAME_LATENCY),  # camera periods, each frame held in memory
     "episode.render_process": BOOL,
     "episode.seen_band": _pair(0.0, 10.0),  # m, world z from the floor

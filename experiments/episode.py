@@ -45,7 +45,7 @@ from planner.map.voxel_map import MapConfig, VoxelMap
 from planner.types import ObstaclePrediction, Planner, PlannerInput
 from sim import World, load_scenario
 from sim.gl_renderer import GLUnavailable
-from sim.rig import SensorMount, cameras, lidars, rig, yaw_matrix
+from sim.rig import SensorMount, cameras, rig_of, yaw_matrix
 from sim.static_grid import static_occupancy
 
 GOAL_TOLERANCE = 0.4  # m: the episode succeeds when the drone is this close to the goal
@@ -106,7 +106,7 @@ def episode_context(sc, seed: int, world: World, cfg: EpisodeConfig, duration: f
     return EpisodeContext(
         scenario=sc.name, seed=seed, duration=duration,
         vehicle=VehicleLimits.from_thrust(v.radius, v.collision_size, v.mass, v.thrust_to_weight),
-        sensors=rig_sensors(sc, world, rig(cfg.rig)), rates=Rates(control=control, plan=cfg.plan_rate, map=sc.rates.camera / cfg.map_every),
+        sensors=rig_sensors(sc, world, rig_of(cfg.rig, sc)[1]), rates=Rates(control=control, plan=cfg.plan_rate, map=sc.rates.camera / cfg.map_every),
         start=np.asarray(sc.drone.start, float), goal=np.asarray(sc.drone.goal, float),
         geofence=(np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2])),
         static_map=vmap, seen=seen)
@@ -163,7 +163,7 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
         world = World(sc, seed=seed, renderer=renderer if renderer is not None else cfg.renderer,
                       segmentation=False, render=render, frame_latency=cfg.frame_latency, color=color,
                       render_process=cfg.render_process and render and cfg.frame_latency > 0)
-        others = cameras(rig(cfg.rig))[1:]
+        others = cameras(rig_of(cfg.rig, sc)[1])[1:]
         if others and render:
             world.add_cameras([m.yaw for m in others])
         if isinstance(spec, str):
@@ -259,7 +259,7 @@ class _Loop:
         summary = summarize_log(self.log.finish())
         summary["map_voxels_occupied"] = int(self.vmap.occupied_count())
         summary["perception_name"] = self.labels["perception_name"]
-        summary["rig"] = self.cfg.rig
+        summary["rig"] = rig_of(self.cfg.rig, self.sc)[0]
         summary["config"] = config
         return summary
 
@@ -286,7 +286,7 @@ class _Loop:
         """The rig's other cameras (their frames come with the first's) and its LiDAR: scanned every
         ``lidar_every``-th camera frame when perception reads scans or the map is built from the sensors."""
         world, perc = self.world, self.perception.perception
-        self.other_cameras = len(cameras(rig(self.cfg.rig))) > 1 and world.render_on
+        self.other_cameras = len(cameras(rig_of(self.cfg.rig, self.sc)[1])) > 1 and world.render_on
         self.lidar = next((s for s in ctx.sensors if isinstance(s, LidarSensor)), None)
         wants_scans = callable(getattr(perc, "observe_lidar", None)) or not self.known_map
         if self.lidar is not None and not (wants_scans and world.render_on):
@@ -311,7 +311,8 @@ class _Loop:
         sc, world, cfg, vmap = self.sc, self.world, self.cfg, self.vmap
         self.rec.header(
             scenario=sc.name, source=sc.source, seed=self.seed, perception=self.labels["perception"],
-            planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map, rig=cfg.rig,
+            planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map,
+            rig=rig_of(cfg.rig, sc)[0],
             sensors=[{"name": s.name, "kind": s.kind, "yaw": round(math.degrees(sensor_yaw(s)), 3)} for s in ctx.sensors],
             frame_latency=cfg.frame_latency,
             rates={"control": ctx.rates.control, "camera": sc.rates.camera, "plan": cfg.plan_rate, "map": ctx.rates.map},

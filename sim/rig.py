@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.lidar import LidarModel, top_mount
+from sim.lidar_model import LidarModel, top_mount
 
 
 @dataclass(frozen=True)
@@ -29,6 +29,7 @@ class SensorMount:
     kind: str
     name: str
     yaw: float = 0.0
+    lidar: LidarModel | None = None  # a LiDAR's model (None: sim.lidar_model's Mid-360-like defaults)
 
     def __post_init__(self):
         if self.kind not in ("camera", "lidar"):
@@ -37,7 +38,7 @@ class SensorMount:
             raise ValueError(f"sensor {self.name!r}: yaw must be a finite angle in [-360, 360] deg, got {self.yaw!r}")
 
     def lidar_model(self) -> LidarModel:
-        return LidarModel()
+        return LidarModel() if self.lidar is None else self.lidar
 
     def T_body_lidar(self) -> np.ndarray:
         """The LiDAR's frame in the body frame: on top, turned by ``yaw``."""
@@ -69,6 +70,14 @@ def rig(name: str) -> tuple[SensorMount, ...]:
         return RIGS[name]
     except KeyError:
         raise ValueError(f"unknown rig {name!r}; the rigs are {', '.join(RIG_NAMES)}") from None
+
+
+def rig_of(name: str | None, scenario) -> tuple[str, tuple[SensorMount, ...]]:
+    """(the rig's name, its sensors): the named rig, or with ``name`` None the scenario's [[sensors]]
+    ("scenario") if it declares them, else ``front``."""
+    if name is None:
+        return ("scenario", scenario.sensors) if scenario.sensors else ("front", RIGS["front"])
+    return name, rig(name)
 
 
 def cameras(sensors) -> tuple[SensorMount, ...]:

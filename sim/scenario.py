@@ -58,6 +58,7 @@ class Scenario:
     camera_path: CameraPath | None = None
     segmentation: bool = True  # render the ground-truth segmentation image every frame
     crowd: Crowd = field(default_factory=Crowd)
+    sensors: tuple = ()  # the drone's rig as declared ([[sensors]], sim.rig.SensorMount); empty: --rig decides
     # the file's tables as read (ranges included): for_seed draws them again, with_values changes them
     tables: dict | None = field(default=None, compare=False, repr=False)
     drawn_seed: int | None = field(default=None, compare=False)  # the seed its ranges were drawn for

@@ -20,6 +20,7 @@ MAX_MOUNT_OFFSET = 1.0  # m, |x|, |y|, |z| of the camera in the body frame
 MAX_ANGLE_DEG = 360.0  # |angle| in degrees
 MAX_OBSTACLES = 200
 MAX_PEOPLE = 100
+MAX_SENSORS = 8  # the sensors of a rig ([[sensors]])
 MAX_POINTS = 100  # waypoints of a person, keyframes of a camera path
 MAX_CHOICES = 100  # values of one {choice = [...]}
 MAX_NAME_CHARS = 200

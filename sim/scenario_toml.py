@@ -10,9 +10,11 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from sim.scenario_bounds import (MAX_ANGLE_DEG, MAX_COORDINATE, MAX_DURATION, MAX_FILE_BYTES, MAX_MOUNT_OFFSET,
+from sim.scenario_bounds import (MAX_SENSORS, MAX_ANGLE_DEG, MAX_COORDINATE, MAX_DURATION, MAX_FILE_BYTES, MAX_MOUNT_OFFSET,
                                  MAX_NAME_CHARS, MAX_OBSTACLE_SIZE, MAX_OBSTACLES, MAX_PEOPLE, MAX_POINTS, SEED_MAX,
                                  ScenarioError, finite_number, short_repr)
+from sim.lidar_model import LidarModel
+from sim.rig import SensorMount
 from sim.scenario_checks import check_geometry
 from sim.scenario_parts import (BEHAVIOURS, OBSTACLE_KINDS, PERSON_HEIGHT_RANGE, PERSON_SPEED_RANGE,
                                 RENDERER_CHOICES, Camera, CameraPath, Corridor, Crowd, Drone, Noise, Obstacle,
@@ -201,13 +203,15 @@ def read_fields(data: dict, source: str, geometry: bool = True) -> dict[str, Any
     rates = _read_rates(top.sub("rates"))
     crowd = _read_crowd(top.sub("crowd"))
     camera_path = _read_camera_path(top.sub("camera_path")) if top.has("camera_path") else None
+    sensors = _read_sensors(top)
     top.done()
 
     if geometry:
         check_geometry(corridor, obstacles, people, drone, camera_path, top.fail)
     return dict(name=name, source=source, seed=seed, duration=duration, description=description,
                 corridor=corridor, obstacles=obstacles, people=people, drone=drone, camera=camera,
-                noise=noise, rates=rates, camera_path=camera_path, segmentation=segmentation, crowd=crowd)
+                noise=noise, rates=rates, camera_path=camera_path, segmentation=segmentation, crowd=crowd,
+                sensors=sensors)
 
 
 def _array_of_tables(top: _Section, name: str, most: int) -> list[_Section]:
@@ -217,6 +221,39 @@ def _array_of_tables(top: _Section, name: str, most: int) -> list[_Section]:
     if len(v) > most:
         top.fail(name, f"at most {most} {name}, got {len(v)}")
     return [_Section(item, f"{name}[{i}]", top.source) for i, item in enumerate(v)]
+
+
+def _read_sensors(top: _Section) -> tuple[SensorMount, ...]:
+    """[[sensors]]: the drone's rig (sim.rig), each a camera like [camera] turned by ``yaw_deg`` on the body,
+    or a LiDAR on top (its model's parameters; sim.lidar_model). The first is the [camera] itself: a camera
+    with ``yaw_deg`` 0. Empty when the file has none (then ``--rig``, front by default, decides)."""
+    out = []
+    for s in _array_of_tables(top, "sensors", MAX_SENSORS):
+        kind = s.string("kind", choices=("camera", "lidar"))
+        if kind is None:
+            s.fail(s.key("kind"), "required: camera or lidar")
+        name = s.string("name", f"{kind}{len(out)}")
+        if not name or len(name) > MAX_NAME_CHARS or not name.isprintable() or name in {m.name for m in out}:
+            s.fail(s.key("name"), f"expected a unique printable name, got {short_repr(name)}")
+        yaw = s.number("yaw_deg", 0.0, lo=-180.0, hi=180.0)
+        lidar = None
+        if kind == "lidar":
+            d = LidarModel()
+            el_min = s.number("elevation_min_deg", math.degrees(d.elevation_min), lo=-90.0, hi=90.0)
+            el_max = s.number("elevation_max_deg", math.degrees(d.elevation_max), lo=-90.0, hi=90.0)
+            if el_max <= el_min:
+                s.fail(s.key("elevation_max_deg"), f"must exceed elevation_min_deg ({el_min}), got {el_max}")
+            lidar = LidarModel(name=name, points_per_scan=s.number("points_per_scan", d.points_per_scan, lo=100,
+                                                                    hi=200_000, integer=True),
+                               scan_rate=s.number("scan_rate", d.scan_rate, lo=1.0, hi=30.0),
+                               elevation_min=math.radians(el_min), elevation_max=math.radians(el_max),
+                               max_range=s.number("max_range", d.max_range, lo=1.0, hi=200.0),
+                               range_std=s.number("range_std", d.range_std, lo=0.0, hi=1.0))
+        s.done()
+        out.append(SensorMount(kind, name, yaw, lidar))
+    if out and (out[0].kind != "camera" or out[0].yaw != 0.0):
+        top.fail("sensors[0]", "the first sensor is the [camera] table's: kind = \"camera\" with yaw_deg = 0")
+    return tuple(out)
 
 
 def _read_corridor(s: _Section) -> Corridor:

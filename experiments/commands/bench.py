@@ -172,7 +172,7 @@ def cmd_bench(args) -> int:
         runs = []
         for _ in range(3):  # the same episode three times: the median real-time factor is quoted
             runs.append(run_episode(sc, seed=0, perception=args.config, renderer=args.renderer,
-                                    cfg=EpisodeConfig(duration=args.seconds, rig=args.rig or "front")))
+                                    cfg=EpisodeConfig(duration=args.seconds, rig=args.rig)))
         rtf = [s["timing"]["real_time_factor"] for s in runs]
         s = sorted(runs, key=lambda r: r["timing"]["real_time_factor"])[1]
         tm = s["timing"]

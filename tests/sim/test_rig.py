@@ -2,9 +2,13 @@
 import numpy as np
 import pytest
 
+from conftest import make_scenario
 from experiments.config_limits import RIG_NAMES
+from experiments.episode import EpisodeConfig, run_episode
+from experiments.episode_log import read_log
 from sim import World, load_scenario
-from sim.rig import RIGS, SensorMount, cameras, lidars, rig
+from sim.rig import RIGS, SensorMount, cameras, lidars, rig, rig_of
+from sim.scenario import ScenarioError
 
 
 def test_the_named_rigs_are_those_the_configuration_accepts():
@@ -65,3 +69,54 @@ def test_each_other_camera_looks_its_way_from_the_same_instant(two_worlds):
     assert np.allclose(zb, -z0, atol=1e-9)
     assert np.allclose(zl, [-z0[1], z0[0], z0[2]], atol=1e-9)
     assert not np.array_equal(back.depth, first.depth)
+
+
+SENSORS = """
+[[sensors]]
+kind = "camera"
+name = "front"
+
+[[sensors]]
+kind = "camera"
+name = "back"
+yaw_deg = 180
+
+[[sensors]]
+kind = "lidar"
+name = "top"
+points_per_scan = 5000
+elevation_min_deg = -15
+"""
+
+
+def test_a_scenario_declares_its_rig_and_rig_of_prefers_the_command_line():
+    sc = make_scenario(SENSORS)
+    front, back, top = sc.sensors
+    assert (front.kind, back.yaw, top.kind) == ("camera", 180.0, "lidar")
+    model = top.lidar_model()
+    assert model.points_per_scan == 5000 and model.elevation_min == pytest.approx(np.radians(-15))
+    assert rig_of(None, sc) == ("scenario", sc.sensors)
+    assert rig_of("lidar", sc) == ("lidar", RIGS["lidar"])
+    assert rig_of(None, make_scenario()) == ("front", RIGS["front"])
+
+
+@pytest.mark.parametrize("bad, message", [
+    ('[[sensors]]\nkind = "lidar"\n', "the first sensor is the \\[camera\\] table's"),
+    ('[[sensors]]\nkind = "camera"\nyaw_deg = 90\n', "the first sensor is the \\[camera\\] table's"),
+    ('[[sensors]]\nkind = "radar"\n', "sensors\\[0\\].kind"),
+    ('[[sensors]]\nkind = "camera"\nname = "a"\n[[sensors]]\nkind = "camera"\nname = "a"\n', "unique"),
+    ('[[sensors]]\nkind = "camera"\n[[sensors]]\nkind = "lidar"\nelevation_max_deg = -20\n', "must exceed"),
+    ('[[sensors]]\nkind = "camera"\n[[sensors]]\nkind = "lidar"\nwavelength = 905\n', "wavelength"),
+])
+def test_a_bad_rig_in_a_scenario_is_one_clear_error(bad, message):
+    with pytest.raises(ScenarioError, match=message):
+        make_scenario(bad)
+
+
+def test_an_episode_flies_the_scenarios_rig(tmp_path):
+    s = run_episode(make_scenario(SENSORS), seed=1, perception="oracle", out=tmp_path,
+                    cfg=EpisodeConfig(duration=0.5, static_map="truth"))
+    assert s["rig"] == "scenario"
+    header = read_log(tmp_path / "log.jsonl.gz")[0]
+    assert [(x["name"], x["kind"], x["yaw"]) for x in header["sensors"]] == \
+        [("front", "rgbd", 0.0), ("back", "rgbd", 180.0), ("top", "lidar", 0.0)]
