@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sim.toml_keys import longest_key
+
 MAX_CONFIG_BYTES = 1 << 20  # a --config file larger than this is refused before it is parsed
 MAX_KEY_DEPTH = 8  # dotted parts in a key: deeper tables are refused
 
@@ -271,6 +273,10 @@ def read_file(path: str | Path) -> list[tuple[str, Any]]:
         text = read_text(path, MAX_CONFIG_BYTES, "a configuration file")
     except TextFileError as e:
         raise ConfigError(f"--config: {e}") from None
+    parts = longest_key(text)  # before parsing: the parser's work grows with the square of a key's parts
+    if parts > MAX_KEY_DEPTH:
+        raise ConfigError(f"--config: {path}: a key of {parts} dotted parts: tables nested more than {MAX_KEY_DEPTH} "
+                          f"deep")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -564,7 +564,7 @@ class ManeuverSelector:
                origin_xy, resolution: float, goal_xy) -> Maneuver:
         """The best candidate from (p0, v0) at time t0; goal_field: metres to goal_xy per column cell,
         clear: static clearance per cell (planner.map.clearance), both on the grid at origin_xy, resolution."""
-        cfg, N = self.cfg, self.N
+        cfg = self.cfg
         gi = np.clip(np.floor((np.asarray(goal_xy, float)[:2] - origin_xy) / resolution).astype(int), 0,
                      np.array(clear.shape) - 1)
         c_goal = float(clear[gi[0], gi[1]])  # a goal near a wall: the static thresholds relax around it
