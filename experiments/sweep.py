@@ -234,8 +234,12 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
               jobs, dask_address, lambda _key, s: finished(s))
     if bar:
         bar.close()
-    agg = aggregate([done[s] for s in seeds], name, perception, planner=planner_label(planner, shield),
-                    settings=settings)
+    try:
+        agg = aggregate([done[s] for s in seeds], name, perception, planner=planner_label(planner, shield),
+                        settings=settings)
+    except (KeyError, TypeError, ValueError, AttributeError) as e:  # rows read from the file lack a field
+        raise SweepError(f"{res_path}: holds rows that are not whole episode summaries ({type(e).__name__}: "
+                         f"{str(e)[:100]}); use another --out folder") from None
     agg["wall_s_this_run"] = round(time.perf_counter() - t0, 1)
     (out / "summary.json").write_text(json.dumps(agg, indent=1))
     (out / "summary.md").write_text(markdown(agg))
