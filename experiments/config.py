@@ -294,7 +294,9 @@ def parse_set(text: str) -> tuple[str, Any]:
     key, sep, raw = text.partition("=")
     key, raw = key.strip(), raw.strip()
     if not sep or not key or not raw:
-        raise ConfigError(f"--set {text!r}: expected section.key=value, e.g. shield.a_brake=3.0")
+        raise ConfigError(f"--set {text[:80]!r}: expected section.key=value, e.g. shield.a_brake=3.0")
+    if not key.isprintable():
+        raise ConfigError(f"--set {key[:80]!r}: a key of printable characters on one line, as shield.a_brake")
     return key, parse_value(raw)
 
 
@@ -311,6 +313,8 @@ def build(sections: Mapping[str, Any], config_file: str | Path | None = None, se
     for key, value, where in pairs:
         section, _, rest = key.partition(".")
         prefix = f"{where}: " if where else ""
+        if not key.isprintable():
+            raise ConfigError(f"{prefix}{key[:80]!r}: a key of printable characters on one line")
         if section not in by_section:
             why = (absent or {}).get(section)
             raise ConfigError(f"{prefix}{key}: {why}" if why else
