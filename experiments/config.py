@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sim.toml_keys import longest_key
+
 MAX_CONFIG_BYTES = 1 << 20  # a --config file larger than this is refused before it is parsed
 MAX_KEY_DEPTH = 8  # dotted parts in a key: deeper tables are refused
 
@@ -271,6 +273,10 @@ def read_file(path: str | Path) -> list[tuple[str, Any]]:
         text = read_text(path, MAX_CONFIG_BYTES, "a configuration file")
     except TextFileError as e:
         raise ConfigError(f"--config: {e}") from None
+    parts = longest_key(text)  # before parsing: the parser's work grows with the square of a key's parts
+    if parts > MAX_KEY_DEPTH:
+        raise ConfigError(f"--config: {path}: a key of {parts} dotted parts: tables nested more than {MAX_KEY_DEPTH} "
+                          f"deep")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -288,7 +294,9 @@ def parse_set(text: str) -> tuple[str, Any]:
     key, sep, raw = text.partition("=")
     key, raw = key.strip(), raw.strip()
     if not sep or not key or not raw:
-        raise ConfigError(f"--set {text!r}: expected section.key=value, e.g. shield.a_brake=3.0")
+        raise ConfigError(f"--set {text[:80]!r}: expected section.key=value, e.g. shield.a_brake=3.0")
+    if not key.isprintable():
+        raise ConfigError(f"--set {key[:80]!r}: a key of printable characters on one line, as shield.a_brake")
     return key, parse_value(raw)
 
 
@@ -305,6 +313,8 @@ def build(sections: Mapping[str, Any], config_file: str | Path | None = None, se
     for key, value, where in pairs:
         section, _, rest = key.partition(".")
         prefix = f"{where}: " if where else ""
+        if not key.isprintable():
+            raise ConfigError(f"{prefix}{key[:80]!r}: a key of printable characters on one line")
         if section not in by_section:
             why = (absent or {}).get(section)
             raise ConfigError(f"{prefix}{key}: {why}" if why else

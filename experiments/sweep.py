@@ -96,22 +96,43 @@ def run_one(scenario, seed: int, perception: str, episodes_dir: str, keep_log: b
 RESULT_KEYS = ("seed",)  # what every results row (an episode summary, a JSON object) holds at least
 
 
+MAX_RESULT_LINE = 4 << 20  # bytes of one results row (an episode summary is some kilobytes)
+MAX_RESULTS_BYTES = 1 << 30  # bytes of a results file: some hundred thousand episodes
+
+
 def read_results(path: Path) -> dict[int, dict]:
     """Seed -> summary from a results file; a line cut short by a kill is ignored, and a file that is not a
-    results file (not UTF-8 text, rows that are not episode summaries, seeds that are not whole numbers)
-    is a SweepError naming the file and the line."""
+    results file (not a regular file, larger than MAX_RESULTS_BYTES, a line longer than MAX_RESULT_LINE, not
+    UTF-8 text, rows that are not episode summaries, seeds that are not whole numbers) is a SweepError naming
+    the file and the line. Read line by line, no line further than its limit."""
     done: dict[int, dict] = {}
     if not path.exists():
         return done
+    if not path.is_file():
+        raise SweepError(f"{path}: not a regular file; not a results file")
+    total = 0
     try:
-        with open(path, encoding="utf-8") as fh:
-            for n, line in enumerate(fh, 1):
+        with open(path, "rb") as fh:
+            for n, raw in enumerate(iter(lambda: fh.readline(MAX_RESULT_LINE + 1), b""), 1):
+                total += len(raw)
+                if len(raw) > MAX_RESULT_LINE:
+                    raise SweepError(f"{path}, line {n}: longer than {MAX_RESULT_LINE >> 20} MiB; not a results file")
+                if total > MAX_RESULTS_BYTES:
+                    raise SweepError(f"{path}: larger than {MAX_RESULTS_BYTES >> 30} GiB; split the sweep into "
+                                     f"several folders")
+                try:
+                    line = raw.decode("utf-8")
+                except UnicodeDecodeError as e:
+                    raise SweepError(f"{path}, line {n}: not UTF-8 text (byte {e.start} of the line); not a results "
+                                     f"file") from None
                 try:
                     r = json.loads(line)
                 except json.JSONDecodeError:
                     continue  # the last line of a killed run
                 except RecursionError:
                     raise SweepError(f"{path}, line {n}: nested too deep; not a results file") from None
+                except ValueError as e:  # an integer of more digits than Python converts
+                    raise SweepError(f"{path}, line {n}: {str(e)[:120]}; not a results file") from None
                 seed = r.get("seed") if isinstance(r, dict) else None
                 if not isinstance(r, dict) or any(k not in r for k in RESULT_KEYS):
                     raise SweepError(f"{path}, line {n}: not an episode summary (a results file holds one per "
@@ -119,8 +140,6 @@ def read_results(path: Path) -> dict[int, dict]:
                 if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= SEED_MAX:
                     raise SweepError(f"{path}, line {n}: seed {seed!r} is not a whole number in [0, {SEED_MAX}]")
                 done[seed] = r
-    except UnicodeDecodeError as e:
-        raise SweepError(f"{path}: not UTF-8 text (byte {e.start}); not a results file") from None
     except OSError as e:
         raise SweepError(f"{path}: cannot read it: {e.strerror or e}") from None
     return done
@@ -215,8 +234,12 @@ def run_sweep(scenario: str, seeds: list[int], perception: str, out: Path, jobs:
               jobs, dask_address, lambda _key, s: finished(s))
     if bar:
         bar.close()
-    agg = aggregate([done[s] for s in seeds], name, perception, planner=planner_label(planner, shield),
-                    settings=settings)
+    try:
+        agg = aggregate([done[s] for s in seeds], name, perception, planner=planner_label(planner, shield),
+                        settings=settings)
+    except (KeyError, TypeError, ValueError, AttributeError) as e:  # rows read from the file lack a field
+        raise SweepError(f"{res_path}: holds rows that are not whole episode summaries ({type(e).__name__}: "
+                         f"{str(e)[:100]}); use another --out folder") from None
     agg["wall_s_this_run"] = round(time.perf_counter() - t0, 1)
     (out / "summary.json").write_text(json.dumps(agg, indent=1))
     (out / "summary.md").write_text(markdown(agg))

@@ -21,14 +21,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from sim.scenario_bounds import (MAX_ANGLE_DEG, MAX_CHOICES, MAX_COORDINATE, MAX_DURATION, MAX_FILE_BYTES,
-                                 MAX_MOUNT_OFFSET, MAX_NAME_CHARS, MAX_OBSTACLE_SIZE, MAX_OBSTACLES, MAX_PEOPLE,
-                                 MAX_POINTS, SEED_MAX, ScenarioError, short_repr)
+from sim.scenario_bounds import (MAX_ANGLE_DEG, MAX_CHECK_POINTS, MAX_CHOICES, MAX_COORDINATE, MAX_DURATION,
+                                 MAX_FILE_BYTES, MAX_MOUNT_OFFSET, MAX_NAME_CHARS, MAX_OBSTACLE_SIZE, MAX_OBSTACLES,
+                                 MAX_PEOPLE, MAX_POINTS, SEED_MAX, ScenarioError, short_repr)
 from sim.scenario_parts import (BEHAVIOURS, OBSTACLE_KINDS, PERSON_HEIGHT_RANGE, PERSON_RADIUS, PERSON_SPEED_RANGE,
                                 RENDERER_CHOICES, RENDERERS, Camera, CameraPath, Corridor, Crowd, Drone, Noise,
                                 Obstacle, Person, Rates, circle_waypoints)
 from sim.scenario_ranges import (MAX_DRAWS, check_ranges, draw, extreme_pick, has_ranges, longest_choice,
-                                 seeded_pick)
+                                 ranged_nodes, seeded_pick)
 from sim.scenario_toml import SCENARIO_DIR, read_fields, read_text, read_toml, scenario_path, shipped_scenarios
 
 __all__ = [
@@ -125,9 +125,10 @@ def _from_tables(data: dict, source: str, seed: int | None) -> Scenario:
     check_ranges(data, source)
     # Every value a range can give must pass the checks of its key: build with the ranges at both ends
     # of every uniform range and at every value of every choice.
+    ranged, memo = ranged_nodes(data), {}  # the draws share the parts holding no range, read once
     for i in range(max(2, longest_choice(data))):
         try:
-            _build(draw(data, extreme_pick(i), source), source, geometry=False)
+            _build(draw(data, extreme_pick(i), source, ranged), source, geometry=False, memo=memo)
         except ScenarioError as e:
             raise ScenarioError(f"{e} (a value one of the scenario's ranges can take)") from None
     if seed is None:
@@ -136,17 +137,22 @@ def _from_tables(data: dict, source: str, seed: int | None) -> Scenario:
             seed = 0  # _build below reports the bad seed by name
     pick = seeded_pick(seed)
 
-    error = None
-    for _ in range(MAX_DRAWS):
+    error, work, tries = None, [0], 0
+    # drawn again while a draw fails, up to MAX_DRAWS times, and no more once the draws' geometry checks have
+    # sampled MAX_CHECK_POINTS path points (a scenario of many long paths: bounded time)
+    while tries < MAX_DRAWS and (tries == 0 or work[0] <= MAX_CHECK_POINTS):
+        tries += 1
         try:
-            sc = _build(draw(data, pick, source), source)
+            sc = _build(draw(data, pick, source, ranged), source, memo=memo, work=work)
         except ScenarioError as e:
             error = e
             continue
         return replace(sc, tables=data, drawn_seed=int(seed))
-    raise ScenarioError(f"{error} (seed {seed}: no draw of the scenario's ranges passed the checks in {MAX_DRAWS} "
-                        f"tries)")
+    why = "" if tries == MAX_DRAWS else f", all that a scenario of paths this long gets ({work[0]} path points checked)"
+    raise ScenarioError(f"{error} (seed {seed}: no draw of the scenario's ranges passed the checks in {tries} "
+                        f"{'try' if tries == 1 else 'tries'}{why})")
 
 
-def _build(data: dict, source: str, geometry: bool = True) -> Scenario:
-    return Scenario(**read_fields(data, source, geometry))
+def _build(data: dict, source: str, geometry: bool = True, memo: dict | None = None,
+           work: list[int] | None = None) -> Scenario:
+    return Scenario(**read_fields(data, source, geometry, memo, work))

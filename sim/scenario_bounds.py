@@ -24,6 +24,8 @@ MAX_SENSORS = 8  # the sensors of a rig ([[sensors]])
 MAX_POINTS = 100  # waypoints of a person, keyframes of a camera path
 MAX_CHOICES = 100  # values of one {choice = [...]}
 MAX_NAME_CHARS = 200
+MAX_CHECK_POINTS = 10_000_000  # path points the geometry checks of one scenario's draws sample, all together
+MAX_KEY_PARTS = 16  # dotted parts of one key or table name (the format's deepest key has 3)
 SEED_MAX = 2**63 - 1  # the largest TOML integer
 
 

@@ -4,7 +4,6 @@ A person is a disc of PERSON_RADIUS; paths are sampled every 5 cm between their 
 """
 from __future__ import annotations
 
-import math
 from typing import Callable, NoReturn
 
 import numpy as np
@@ -19,14 +18,18 @@ def _inside_corridor(c: Corridor, xy: np.ndarray, margin: float) -> np.ndarray:
 
 
 def _sample_segments(points: np.ndarray, closed: bool, step: float = 0.05) -> np.ndarray:
+    """The path through ``points`` (closed: back to the first) sampled at most ``step`` apart: the first
+    point, then each segment a -> b at a + linspace(0, 1, n)[1:] (b - a), n = max(2, ceil(|b - a| / step) + 1)."""
     pts = np.asarray(points, dtype=float)
     if closed:
         pts = np.vstack([pts, pts[:1]])
-    out = [pts[:1]]
-    for a, b in zip(pts[:-1], pts[1:]):
-        n = max(2, int(math.ceil(np.linalg.norm(b - a) / step)) + 1)
-        out.append(a + np.linspace(0, 1, n)[1:, None] * (b - a))
-    return np.vstack(out)
+    a, b = pts[:-1], pts[1:]
+    n = np.maximum(2, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(np.int64) + 1)  # samples per segment
+    seg = np.repeat(np.arange(len(a)), n - 1)
+    k = np.arange(len(seg)) - np.repeat(np.cumsum(n - 1) - (n - 1), n - 1) + 1  # 1 .. n - 1 in each segment
+    t = k * (1.0 / (n - 1))[seg]  # as linspace steps
+    t[k == (n - 1)[seg]] = 1.0  # each segment ends on its end point, as linspace does
+    return np.vstack([pts[:1], a[seg] + t[:, None] * (b - a)[seg]])
 
 
 def _near_box(o: Obstacle, margin: float) -> tuple[np.ndarray, np.ndarray]:
@@ -76,10 +79,12 @@ def _region_covered(obstacles, region, margin: float, most: int = 256) -> bool:
 
 
 def check_geometry(corridor: Corridor, obstacles: tuple[Obstacle, ...], people: tuple[Person, ...], drone: Drone,
-                   camera_path: CameraPath | None, fail: Callable[[str, str], NoReturn]) -> None:
+                   camera_path: CameraPath | None, fail: Callable[[str, str], NoReturn],
+                   work: list[int] | None = None) -> None:
     """Calls ``fail(key, reason)`` (which raises) for the first part that does not fit: an obstacle sticking out
     of the corridor, a person's path leaving it or walking through an obstacle, the drone's start or goal, or
-    the camera path, outside the corridor or inside an obstacle."""
+    the camera path, outside the corridor or inside an obstacle. work: a one-item
+    list counting the path points sampled (a person's path every 5 cm), added to as they are sampled."""
     c = corridor
     for i, o in enumerate(obstacles):
         lo, hi = o.aabb()
@@ -125,6 +130,8 @@ def check_geometry(corridor: Corridor, obstacles: tuple[Obstacle, ...], people: 
         outside = ~_inside_corridor(c, wps, PERSON_RADIUS)
         if not np.any(outside):
             samples = _sample_segments(wps, closed=p.behaviour in ("waypoint_loop", "circle"))
+            if work is not None:
+                work[0] += len(samples)
             outside = ~_inside_corridor(c, samples, PERSON_RADIUS)
         if np.any(outside):
             q = samples[np.argmax(outside)]

@@ -43,18 +43,21 @@ def _lookup(tables: Any, path: str) -> Any:
     return node
 
 
-def _follow(tables: Any, drawn: Any, source: str, key: str = "") -> Any:
-    """Replace every {same_as = ...} by the value it names in ``drawn``, times and plus applied."""
+def _follow(tables: Any, drawn: Any, source: str, key: str = "", fresh: set | None = None) -> Any:
+    """Replace every {same_as = ...} by the value it names in ``drawn``, times and plus applied. fresh: the ids
+    of the tables and lists a draw made anew (draw); any other holds no range and is returned as it is."""
     if _range_of(tables) == "same_as":
         v = _lookup(drawn, tables["same_as"])
         if not finite_number(v):
             raise ScenarioError(f"{source}: {key}: same_as {short_repr(tables['same_as'])} does not name a number of the "
                                 f"scenario (got {short_repr(v)})")
         return v * tables.get("times", 1.0) + tables.get("plus", 0.0)
+    if fresh is not None and id(tables) not in fresh:
+        return tables
     if isinstance(tables, dict):
-        return {k: _follow(x, drawn, source, f"{key}.{k}" if key else k) for k, x in tables.items()}
+        return {k: _follow(x, drawn, source, f"{key}.{k}" if key else k, fresh) for k, x in tables.items()}
     if isinstance(tables, list):
-        return [_follow(x, drawn, source, f"{key}[{i}]") for i, x in enumerate(tables)]
+        return [_follow(x, drawn, source, f"{key}[{i}]", fresh) for i, x in enumerate(tables)]
     return tables
 
 
@@ -112,21 +115,42 @@ def longest_choice(v: Any) -> int:
     return 0
 
 
-def draw(v: Any, pick, source: str = "", root: Any = None) -> Any:
-    """The tables with every range replaced by pick(kind, values), then every same_as by what it names."""
-    if root is None:
-        drawn = draw(v, pick, source, v)
-        return _follow(drawn, drawn, source)
+def ranged_nodes(v: Any, out: set | None = None) -> set:
+    """The ids of the tables and lists of ``v`` that are a range or hold one somewhere (for draw)."""
+    out = set() if out is None else out
+    if _range_of(v):
+        out.add(id(v))
+        return out
+    if isinstance(v, (dict, list)):
+        for x in (v.values() if isinstance(v, dict) else v):
+            ranged_nodes(x, out)
+            if id(x) in out:
+                out.add(id(v))
+    return out
+
+
+def draw(v: Any, pick, source: str = "", ranged: set | None = None) -> Any:
+    """The tables with every range replaced by pick(kind, values), then every same_as by what it names.
+    Parts that hold no range are not copied: the result shares them with ``v`` (read them, do not change
+    them). ranged: ranged_nodes(v), when the caller draws ``v`` many times."""
+    ranged = ranged_nodes(v) if ranged is None else ranged
+    fresh: set = set()
+    drawn = _draw(v, pick, ranged, fresh)
+    return _follow(drawn, drawn, source, fresh=fresh)
+
+
+def _draw(v: Any, pick, ranged: set, fresh: set) -> Any:
+    if id(v) not in ranged:
+        return v
     kind = _range_of(v)
     if kind == "same_as":
         return v  # resolved once everything is drawn
     if kind:
         return pick(kind, v[kind])
-    if isinstance(v, dict):
-        return {k: draw(x, pick, source, root) for k, x in v.items()}
-    if isinstance(v, list):
-        return [draw(x, pick, source, root) for x in v]
-    return v
+    out = ({k: _draw(x, pick, ranged, fresh) for k, x in v.items()} if isinstance(v, dict)
+           else [_draw(x, pick, ranged, fresh) for x in v])
+    fresh.add(id(out))
+    return out
 
 
 def extreme_pick(i: int):

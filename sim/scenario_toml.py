@@ -10,15 +10,18 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from sim.scenario_bounds import (MAX_SENSORS, MAX_ANGLE_DEG, MAX_COORDINATE, MAX_DURATION, MAX_FILE_BYTES, MAX_MOUNT_OFFSET,
-                                 MAX_NAME_CHARS, MAX_OBSTACLE_SIZE, MAX_OBSTACLES, MAX_PEOPLE, MAX_POINTS, SEED_MAX,
-                                 ScenarioError, finite_number, short_repr)
+import numpy as np
+
 from sim.lidar_model import LidarModel
 from sim.rig import SensorMount
+from sim.scenario_bounds import (MAX_ANGLE_DEG, MAX_COORDINATE, MAX_DURATION, MAX_FILE_BYTES, MAX_KEY_PARTS,
+                                 MAX_MOUNT_OFFSET, MAX_NAME_CHARS, MAX_OBSTACLE_SIZE, MAX_OBSTACLES, MAX_PEOPLE,
+                                 MAX_POINTS, MAX_SENSORS, SEED_MAX, ScenarioError, finite_number, short_repr)
 from sim.scenario_checks import check_geometry
 from sim.scenario_parts import (BEHAVIOURS, OBSTACLE_KINDS, PERSON_HEIGHT_RANGE, PERSON_SPEED_RANGE,
                                 RENDERER_CHOICES, Camera, CameraPath, Corridor, Crowd, Drone, Noise, Obstacle,
                                 Person, Rates)
+from sim.toml_keys import longest_key
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -57,9 +60,13 @@ def read_text(path: Path) -> str:
 
 
 def read_toml(text: str, source: str) -> dict:
-    """The tables of a scenario's TOML text (``source`` names it in messages)."""
+    """The tables of a scenario's TOML text (``source`` names it in messages). A key of more than MAX_KEY_PARTS
+    dotted parts is refused before the text is parsed (the parser's work grows with their square)."""
     if len(text) > MAX_FILE_BYTES:
         raise ScenarioError(f"{source}: {len(text)} characters; a scenario holds at most {MAX_FILE_BYTES}")
+    parts = longest_key(text)
+    if parts > MAX_KEY_PARTS:
+        raise ScenarioError(f"{source}: a key of {parts} dotted parts; a scenario's keys have at most {MAX_KEY_PARTS}")
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -155,6 +162,9 @@ class _Section:
         if len(v) > MAX_POINTS:
             self.fail(self.key(name), f"at most {MAX_POINTS} points, got {len(v)}")
         bounds = bounds or (MAX_COORDINATE,) * n
+        plain = _plain_points(v, n, bounds)
+        if plain is not None:
+            return plain
         out = []
         for i, p in enumerate(v):
             if (not isinstance(p, list) or len(p) != n
@@ -182,9 +192,42 @@ class _Section:
             self.fail(self.key(unknown[0]), "unknown key" + (f" (also unknown: {', '.join(unknown[1:])})" if len(unknown) > 1 else ""))
 
 
-def read_fields(data: dict, source: str, geometry: bool = True) -> dict[str, Any]:
+def _plain_points(v: list, n: int, bounds) -> tuple | None:
+    """The points of ``v`` as Section.points gives them when every one is a list of n finite numbers (no
+    booleans) within bounds, checked at once; None otherwise (Section.points then finds the first fault)."""
+    if not all(type(p) is list and len(p) == n for p in v):
+        return None
+    flat = [x for p in v for x in p]
+    if not all(type(x) is float or type(x) is int for x in flat):
+        return None
+    try:
+        a = np.array(flat, dtype=float).reshape(len(v), n)
+    except OverflowError:  # an integer beyond any float
+        return None
+    if not (np.all(np.isfinite(a)) and np.all(np.abs(a) <= np.asarray(bounds, dtype=float))):
+        return None
+    return tuple(map(tuple, a.tolist()))
+
+
+def _read_once(read, s: "_Section", memo: dict | None):
+    """read(s), or what it gave for the very same table before (memo: id -> (table, result); holding the table
+    keeps its id from being reused): draws of a scenario share the tables that hold no range."""
+    if memo is None:
+        return read(s)
+    hit = memo.get(id(s.data))
+    if hit is not None and hit[0] is s.data:
+        return hit[1]
+    out = read(s)
+    memo[id(s.data)] = (s.data, out)
+    return out
+
+
+def read_fields(data: dict, source: str, geometry: bool = True, memo: dict | None = None,
+                work: list[int] | None = None) -> dict[str, Any]:
     """The fields of a sim.scenario.Scenario from the file's tables (its ranges drawn already), each key checked;
-    geometry: the parts' geometry checked too (sim.scenario_checks)."""
+    geometry: the parts' geometry checked too (sim.scenario_checks). memo: a dict kept from draw to draw of
+    one scenario, so that an obstacle or a person holding no range is read once (_read_once); work: the
+    geometry checks' count of path points (check_geometry)."""
     top = _Section(data, "", source)
     name = top.string("name", Path(source).stem)
     if not name or len(name) > MAX_NAME_CHARS or not name.isprintable():
@@ -195,8 +238,8 @@ def read_fields(data: dict, source: str, geometry: bool = True) -> dict[str, Any
     segmentation = top.boolean("segmentation", True)
 
     corridor = _read_corridor(top.sub("corridor"))
-    obstacles = tuple(_read_obstacle(s) for s in _array_of_tables(top, "obstacles", MAX_OBSTACLES))
-    people = tuple(_read_person(s) for s in _array_of_tables(top, "people", MAX_PEOPLE))
+    obstacles = tuple(_read_once(_read_obstacle, s, memo) for s in _array_of_tables(top, "obstacles", MAX_OBSTACLES))
+    people = tuple(_read_once(_read_person, s, memo) for s in _array_of_tables(top, "people", MAX_PEOPLE))
     drone = _read_drone(top.sub("drone"))
     camera = _read_camera(top.sub("camera"))
     noise = _read_noise(top.sub("noise"))
@@ -207,7 +250,7 @@ def read_fields(data: dict, source: str, geometry: bool = True) -> dict[str, Any
     top.done()
 
     if geometry:
-        check_geometry(corridor, obstacles, people, drone, camera_path, top.fail)
+        check_geometry(corridor, obstacles, people, drone, camera_path, top.fail, work)
     return dict(name=name, source=source, seed=seed, duration=duration, description=description,
                 corridor=corridor, obstacles=obstacles, people=people, drone=drone, camera=camera,
                 noise=noise, rates=rates, camera_path=camera_path, segmentation=segmentation, crowd=crowd,

@@ -51,12 +51,24 @@ def within_reach(cfg: MPCConfig, c, obstacles, T: float) -> np.ndarray:
 
 def dynamic_candidates(cfg: MPCConfig, c, obstacles, side, v_plan=None):
     """The obstacles (4) applies to, nearest first: (distance from the plan to the ellipsoid, index in
-    `obstacles`, predicted centres (N, 3), semi-axes (N, 3), tie-break side (3,)), at most max_dynamic."""
+    `obstacles`, predicted centres (N, 3), semi-axes (N, 3), tie-break side (3,)), at most max_dynamic.
+    The obstacles within reach are measured together, each value as for the obstacle alone."""
     N = cfg.horizon
     t = cfg.dt * np.arange(1, N + 1)
-    cand = []
-    for idx in within_reach(cfg, c, obstacles, t[-1]):
+    near = within_reach(cfg, c, obstacles, t[-1])
+    if not len(near):
+        return []
+    o = np.empty((len(near), N, 3))
+    ax = np.empty((len(near), N, 3))
+    for j, idx in enumerate(near):
         ob = obstacles[idx]
+        o[j] = ob.predict(t)
+        ax[j] = np.asarray(ob.size, dtype=float) / 2 + cfg.robot_radius + cfg.dynamic_margin
+        ax[j, :, :2] += cfg.z_std * ob.std_at(t)[:, None]
+    dist = np.min(np.linalg.norm(c - o, axis=2) - ax.max(axis=2), axis=1)  # to the ellipsoid, roughly
+    cand = []
+    for j in np.flatnonzero(dist <= cfg.dynamic_range):
+        ob = obstacles[near[j]]
         sd = side
         if cfg.relative_side and v_plan is not None:
             vo = np.asarray(ob.velocity, dtype=float)
@@ -65,13 +77,7 @@ def dynamic_candidates(cfg: MPCConfig, c, obstacles, side, v_plan=None):
                 sd = np.array([-vr[1], vr[0], 0.0]) / np.hypot(*vr)
                 lead = float(sd @ vo)  # the tie goes behind the obstacle; left of travel if it is neither
                 sd = -sd if lead > 0.05 or (lead >= -0.05 and float(sd @ side) < 0) else sd
-        o = ob.predict(t)
-        half = np.asarray(ob.size, dtype=float) / 2 + cfg.robot_radius + cfg.dynamic_margin
-        ax = np.repeat(half[None], N, axis=0)
-        ax[:, :2] += cfg.z_std * ob.std_at(t)[:, None]
-        dist = float(np.min(np.linalg.norm(c - o, axis=1) - ax.max(axis=1)))  # to the ellipsoid, roughly
-        if dist <= cfg.dynamic_range:
-            cand.append((dist, idx, o, ax, sd))
+        cand.append((float(dist[j]), int(near[j]), o[j], ax[j], sd))
     return sorted(cand, key=lambda e: e[:2])[:cfg.max_dynamic]
 
 

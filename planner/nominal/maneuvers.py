@@ -205,36 +205,61 @@ _START_HEADINGS = np.array([[math.cos(h), math.sin(h)] for h in np.arange(8) * (
 
 def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
     """Futures of one moving obstacle: centres (H, K, 2) at ``times`` and prior weights (H,)."""
+    paths, w, _ = futures([ob], times, cfg)
+    return paths, w
+
+
+def futures(obstacles, times: np.ndarray, cfg: ManeuverConfig, predicted: np.ndarray | None = None):
+    """The futures (module docstring) of several moving obstacles at once: centres (H, K, 2) at ``times``,
+    prior weights (H,), and how many of them each obstacle has (n,), obstacle after obstacle. Each value
+    is computed as for the obstacle alone, element by element (the same floats). predicted (n, K, 2): their
+    own predictions at ``times`` (x, y of ob.predict), when the caller has them already."""
     t = np.asarray(times, dtype=float)
-    c, v = np.asarray(ob.center, float)[:2], np.asarray(ob.velocity, float)[:2]
-    speed = float(np.hypot(*v))
+    K, n = len(t), len(obstacles)
     dt = np.diff(np.r_[0.0, t])
     lo, hi = cfg.walk_speed
+    c = np.empty((n, 2))
+    v = np.empty((n, 2))
+    keep = np.empty((n, K, 2))
+    for i, ob in enumerate(obstacles):
+        c[i], v[i] = np.asarray(ob.center, float)[:2], np.asarray(ob.velocity, float)[:2]
+        keep[i] = ob.predict(t)[:, :2] if predicted is None else predicted[i]
+    speed = np.hypot(v[:, 0], v[:, 1])
     standing = speed < cfg.standing
-    n_turns = len(_START_HEADINGS) if standing else len(_TURNS)
-    paths = np.empty((2 + n_turns, len(t), 2))
-    paths[0] = ob.predict(t)[:, :2]
+    count = np.where(standing, 2 + len(_START_HEADINGS), 2 + len(_TURNS))
+    first = np.r_[0, np.cumsum(count)[:-1]].astype(np.int64)
+    paths = np.empty((int(count.sum()), K, 2))
+    paths[first] = keep
     # stopping: decelerate along the current velocity
     ts = speed / cfg.stop_decel  # standing from then on
-    s_stop = np.where(t < ts, speed * t - 0.5 * cfg.stop_decel * t * t, speed * ts - 0.5 * cfg.stop_decel * ts * ts)
-    u = v / speed if speed > 1e-6 else np.zeros(2)
-    paths[1] = c + s_stop[:, None] * u
-    if standing:  # no heading: start walking in 8 directions
-        sp = np.minimum(speed + cfg.start_accel * t, lo)
-        walked = np.cumsum(sp * dt)[:, None]  # the same distance along every heading
-        paths[2:] = c + walked[None] * _START_HEADINGS[:, None, :]
-    else:
-        th0 = math.atan2(v[1], v[0])
-        s = float(np.clip(speed, lo, hi))
-        rate = cfg.turn_rate * min(1.0, 1.0 / s) if s > 0 else cfg.turn_rate
-        turned = rate * t
-        th = th0 + _TURN_SIGN * np.minimum(turned, _TURN_SIZE)  # (7, K), one row per turn
-        ds = (s * np.where(turned < _TURN_SIZE, _TURN_PACE, 1.0)) * dt  # slower while turning
-        paths[2:, :, 0] = c[0] + np.cumsum(np.cos(th) * ds, axis=1)
-        paths[2:, :, 1] = c[1] + np.cumsum(np.sin(th) * ds, axis=1)
-    w = np.full(2 + n_turns, cfg.p_turn / n_turns)
-    w[0], w[1] = cfg.p_keep, cfg.p_stop
-    return paths, w
+    s_stop = np.where(t[None] < ts[:, None], speed[:, None] * t - 0.5 * cfg.stop_decel * t * t,
+                      (speed * ts - 0.5 * cfg.stop_decel * ts * ts)[:, None])
+    moving = speed > 1e-6
+    u = np.zeros((n, 2))
+    u[moving] = v[moving] / speed[moving, None]
+    paths[first + 1] = c[:, None, :] + s_stop[:, :, None] * u[:, None, :]
+    st = np.flatnonzero(standing)
+    if len(st):  # no heading: start walking in 8 directions
+        sp = np.minimum(speed[st, None] + cfg.start_accel * t, lo)
+        walked = np.cumsum(sp * dt, axis=1)  # the same distance along every heading
+        rows = first[st, None] + 2 + np.arange(len(_START_HEADINGS))
+        paths[rows] = c[st, None, None, :] + walked[:, None, :, None] * _START_HEADINGS[None, :, None, :]
+    wk = np.flatnonzero(~standing)
+    if len(wk):
+        th0 = np.array([math.atan2(v[i, 1], v[i, 0]) for i in wk])
+        s = np.clip(speed[wk], lo, hi)
+        with np.errstate(divide="ignore"):
+            inv = 1.0 / s
+        rate = np.where(s > 0, cfg.turn_rate * np.where(inv < 1.0, inv, 1.0), cfg.turn_rate)  # min(1, 1 / s)
+        turned = (rate[:, None] * t)[:, None, :]  # (w, 1, K)
+        th = th0[:, None, None] + _TURN_SIGN[None] * np.minimum(turned, _TURN_SIZE[None])  # (w, 7, K)
+        ds = (s[:, None, None] * np.where(turned < _TURN_SIZE[None], _TURN_PACE[None], 1.0)) * dt  # slower turning
+        rows = first[wk, None] + 2 + np.arange(len(_TURNS))
+        paths[rows, :, 0] = c[wk, 0, None, None] + np.cumsum(np.cos(th) * ds, axis=2)
+        paths[rows, :, 1] = c[wk, 1, None, None] + np.cumsum(np.sin(th) * ds, axis=2)
+    w = np.repeat(cfg.p_turn / (count - 2), count)
+    w[first], w[first + 1] = cfg.p_keep, cfg.p_stop
+    return paths, w, count
 
 
 @njit(cache=True, nogil=True)
@@ -283,6 +308,69 @@ def _static_terms(P, stop, clear, goal, ox, oy, res, r_robot, m_s, w_hit, w_stat
     return st, g_sum, g_end
 
 
+_BLOCK = 8  # rows outside the groups of _best are culled by reach in blocks of this many
+
+
+@njit(cache=True, nogil=True)
+def _block_reach(P, O, far, r0, r1, c0, ks, lo, hi):
+    """The steps at which each hypothesis may be within reach of a block of candidates: rows r0 <= c < r1 of
+    P (C, K, 2), steps below ks read in row c0 alone (shared steps, as _best reads them). Writes lo, hi (H,):
+    hypothesis h of O (H, K, 2) is farther than sqrt(far[h, k]) from every row of the block at every step
+    outside lo[h] <= k < hi[h] (lo = hi: at all). The distance is to the block's bounding box at step k,
+    which is no farther than any row's point in floating point too (subtraction rounds monotonically), so
+    the steps left out are ones _best's own test would skip. A NaN anywhere counts as within reach."""
+    K, H = P.shape[1], O.shape[0]
+    box = np.empty((K, 4))  # x min, x max, y min, y max
+    for k in range(K):
+        if k < ks:
+            x, y = P[c0, k, 0], P[c0, k, 1]
+            box[k, 0], box[k, 1], box[k, 2], box[k, 3] = x, x, y, y
+            continue
+        x0, x1, y0, y1 = math.inf, -math.inf, math.inf, -math.inf
+        for c in range(r0, r1):
+            x, y = P[c, k, 0], P[c, k, 1]
+            if x != x or y != y:
+                continue  # a NaN row adds no term at any distance
+            x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
+        box[k, 0], box[k, 1], box[k, 2], box[k, 3] = x0, x1, y0, y1
+    for h in range(H):
+        first, last = K, 0
+        for k in range(K):
+            ox, oy = O[h, k, 0], O[h, k, 1]
+            dx, dy = 0.0, 0.0
+            if box[k, 0] - ox > dx:
+                dx = box[k, 0] - ox
+            if ox - box[k, 1] > dx:
+                dx = ox - box[k, 1]
+            if box[k, 2] - oy > dy:
+                dy = box[k, 2] - oy
+            if oy - box[k, 3] > dy:
+                dy = oy - box[k, 3]
+            if dx * dx + dy * dy > far[h, k]:
+                continue
+            if k < first:
+                first = k
+            last = k + 1
+        lo[h], hi[h] = (first, last) if first < last else (0, 0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _dyn_term(P, O, R, gamma, far, m_d, w_near, w_hit, row, h, k, s):
+    """s plus the dynamic term of hypothesis h at step k for row ``row`` (module docstring's C_oh)."""
+    dx = P[row, k, 0] - O[h, k, 0]
+    dy = P[row, k, 1] - O[h, k, 1]
+    d2 = dx * dx + dy * dy
+    if d2 > far[h, k]:
+        return s  # farther than R + m_d: no term
+    e = math.sqrt(d2) - R[h, k]
+    if e < m_d:
+        v = w_near * (m_d - e) * (m_d - e)
+        if e < 0.0:
+            v += w_hit
+        s += gamma[h, k] * v
+    return s
+
+
 @njit(cache=True, nogil=True)
 def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamma, keep, r_robot, m_s, m_d,
           w_goal, w_hit, w_static, w_near, worst, w_keep, w_acc, gx, gy, near_goal, r_goal, m_goal, first, group,
@@ -297,7 +385,11 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
     group, shared: rows a * group to a * group + group - 1 (a < group) start with the same ``shared`` steps
     (P, A and so stop's prefix as _two_phase writes them), which are read in the group's first row only
     (the others' may be left unwritten): the terms of those steps are summed once per group and each row
-    goes on from there, the same sums in the same order (group 0: none shared)."""
+    goes on from there, the same sums in the same order (group 0: none shared).
+    Cull by reach: the rows come in blocks (a group, or _BLOCK rows outside the groups); per block and
+    hypothesis only the steps _block_reach finds within reach are summed, and an obstacle none of whose
+    hypotheses comes within reach of the block is passed over. The steps and obstacles left out add no
+    term, so every sum is the same float, added in the same order."""
     C, K = P.shape[0], P.shape[1]
     H = O.shape[0]
     start = np.zeros(n_obst + 1, np.int64)  # the hypotheses of obstacle o: start[o]:start[o + 1]
@@ -329,6 +421,14 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
         for k in range(K):
             lim = R[h, k] + m_d
             far[h, k] = (lim * (1.0 + 1e-9)) ** 2 if lim > 0.0 else -1.0
+    # blocks: the groups, then the other rows _BLOCK at a time; each culled by reach when first needed
+    n_rest = C - n_group * group
+    n_block = n_group + (n_rest + _BLOCK - 1) // _BLOCK
+    ready = np.zeros(n_block, np.bool_)
+    lo = np.zeros((n_block, H), np.int64)
+    hi = np.zeros((n_block, H), np.int64)
+    dyn_pre = np.zeros((n_block, H))  # per group and hypothesis: the sum over its shared steps
+    near = np.zeros((n_block, n_obst), np.bool_)  # obstacle o has a hypothesis within reach of the block
     best_j, best_c = math.inf, -1
     for n in range(C + 1):
         if n == 0:
@@ -345,6 +445,9 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
             a = c // group
             c0 = a * group
             k0, st, g_sum, g_end, kp, ef = ks, pre[a, 0], pre[a, 1], pre[a, 2], pre[a, 3], pre[a, 4]
+            blk = a
+        else:
+            blk = n_group + (c - n_group * group) // _BLOCK
         st, g_sum, g_end = _static_terms(P, stop, clear, goal, ox, oy, res, r_robot, m_s, w_hit, w_static, gx, gy,
                                          near_goal, r_goal, m_goal, c, k0, K + 1, st, g_sum, g_end)
         jg = w_goal * 0.5 * (g_end + g_sum / K)
@@ -358,25 +461,31 @@ def _best(P, A, stop, clear, goal, ox, oy, res, O, R, owner, prior, n_obst, gamm
         ef = w_acc * ef / K
         if jg + st + 0.0 + kp + ef > best_j:
             continue
+        if not ready[blk]:
+            if blk < n_group:
+                r0, r1 = blk * group, blk * group + group
+            else:
+                r0 = n_group * group + (blk - n_group) * _BLOCK
+                r1 = min(r0 + _BLOCK, C)
+            _block_reach(P, O, far, r0, r1, c0, k0, lo[blk], hi[blk])
+            for h in range(H):
+                s = 0.0
+                for k in range(lo[blk, h], min(hi[blk, h], k0)):
+                    s = _dyn_term(P, O, R, gamma, far, m_d, w_near, w_hit, c0, h, k, s)
+                dyn_pre[blk, h] = s
+                if hi[blk, h] > lo[blk, h]:
+                    near[blk, owner[h]] = True
+            ready[blk] = True
         dyn = 0.0
         cut = False
         for o in range(n_obst):
+            if not near[blk, o]:
+                continue  # every term of its hypotheses is 0: the sum is unchanged
             exp, mx = 0.0, 0.0
             for h in range(start[o], start[o + 1]):
-                s = 0.0
-                for k in range(K):
-                    row = c if k >= k0 else c0  # the shared steps: read in the group's first row
-                    dx = P[row, k, 0] - O[h, k, 0]
-                    dy = P[row, k, 1] - O[h, k, 1]
-                    d2 = dx * dx + dy * dy
-                    if d2 > far[h, k]:
-                        continue  # farther than R + m_d: no term
-                    e = math.sqrt(d2) - R[h, k]
-                    if e < m_d:
-                        v = w_near * (m_d - e) * (m_d - e)
-                        if e < 0.0:
-                            v += w_hit
-                        s += gamma[h, k] * v
+                s = dyn_pre[blk, h]  # the shared steps (below k0), read in the group's first row
+                for k in range(max(lo[blk, h], k0), hi[blk, h]):
+                    s = _dyn_term(P, O, R, gamma, far, m_d, w_near, w_hit, c, h, k, s)
                 exp += prior[h] * s
                 mx = max(mx, s)
             dyn += exp + worst * mx
@@ -455,7 +564,7 @@ class ManeuverSelector:
                origin_xy, resolution: float, goal_xy) -> Maneuver:
         """The best candidate from (p0, v0) at time t0; goal_field: metres to goal_xy per column cell,
         clear: static clearance per cell (planner.map.clearance), both on the grid at origin_xy, resolution."""
-        cfg, N = self.cfg, self.N
+        cfg = self.cfg
         gi = np.clip(np.floor((np.asarray(goal_xy, float)[:2] - origin_xy) / resolution).astype(int), 0,
                      np.array(clear.shape) - 1)
         c_goal = float(clear[gi[0], gi[1]])  # a goal near a wall: the static thresholds relax around it
@@ -468,26 +577,11 @@ class ManeuverSelector:
             q = None
         P, V, A = self.candidates(p0, v0, guide_dir, prev_acc, q, out=self._buffers, full=False)
         stop = _stopping_points(P, V, 2 * cfg.brake)
-        O, R, G, owner, prior = [], [], [], [], []
-        for j, ob in enumerate(obstacles):
-            paths, w = hypotheses(ob, self.t, cfg)
-            size = np.asarray(ob.size, float)
-            rad = 0.5 * min(max(size[0], size[1]), cfg.max_extent) + self.r + ob.std_at(self.t)
-            O.append(paths)
-            R.append(np.vstack([rad[None], np.repeat((rad - self.evade)[None], len(w) - 1, axis=0)]))
-            G.append(np.vstack([self.gamma[None], np.repeat(self.gamma_alt[None], len(w) - 1, axis=0)]))
-            owner.append(np.full(len(w), j))
-            prior.append(w)
-        if O:
-            O, R, G = np.concatenate(O), np.ascontiguousarray(np.concatenate(R)), np.concatenate(G)
-            owner, prior = np.concatenate(owner).astype(np.int64), np.concatenate(prior)
-        else:
-            O, R, G = np.zeros((0, N, 2)), np.zeros((0, N)), np.zeros((0, N))
-            owner, prior = np.zeros(0, np.int64), np.zeros(0)
+        O, R, G, owner, prior = self._obstacle_terms(obstacles, p0, v0)
         keep = prev_pos[1:cfg.keep_steps + 1] if prev_pos is not None else np.zeros((0, 2))
         parts = np.empty(5)
         b, cost = _best(P, A, stop, clear, goal_field, float(origin_xy[0]), float(origin_xy[1]), float(resolution),
-                        np.ascontiguousarray(O), R, owner, prior, len(obstacles), G, np.ascontiguousarray(keep),
+                        O, R, owner, prior, owner[-1] + 1 if len(owner) else 0, G, np.ascontiguousarray(keep),
                         self.r, cfg.static_margin, cfg.dynamic_margin, cfg.w_goal, cfg.w_hit, cfg.w_static,
                         cfg.w_near, cfg.worst_case, cfg.w_keep, cfg.w_acc, float(goal_xy[0]), float(goal_xy[1]),
                         cfg.near_goal, r_goal, m_goal, len(P) - 1 if prev_acc is not None else -1,
@@ -497,6 +591,55 @@ class ManeuverSelector:
         pos, vel = np.vstack([p0, pb]), np.vstack([v0, vb])
         self._prev = (float(t0), pos, ab)
         return Maneuver(pos, vel, ab.copy(), float(cost), dict(zip(names, parts.round(4).tolist())), len(P))
+
+    def _obstacle_terms(self, obstacles, p0, v0):
+        """_best's obstacle arrays: the futures' centres O (H, N, 2), radii R (H, N), weights over the horizon G
+        (H, N), owner (H,) and priors (H,) of the obstacles within reach (_within_reach), renumbered 0, 1, ..."""
+        cfg, N = self.cfg, self.N
+        n = len(obstacles)
+        centre = np.empty((n, 2))
+        speed = np.empty(n)
+        keep = np.empty((n, N, 2))
+        rad = np.empty((n, N))
+        for i, ob in enumerate(obstacles):
+            centre[i] = np.asarray(ob.center, float)[:2]
+            speed[i] = np.hypot(*np.asarray(ob.velocity, float)[:2])
+            keep[i] = ob.predict(self.t)[:, :2]
+            size = np.asarray(ob.size, float)
+            rad[i] = 0.5 * min(max(size[0], size[1]), cfg.max_extent) + self.r + ob.std_at(self.t)
+        near = np.flatnonzero(self._within_reach(p0, v0, centre, speed, keep, rad))
+        if not len(near):
+            return np.zeros((0, N, 2)), np.zeros((0, N)), np.zeros((0, N)), np.zeros(0, np.int64), np.zeros(0)
+        O, prior, count = futures([obstacles[i] for i in near], self.t, cfg, keep[near])
+        first = np.r_[0, np.cumsum(count)[:-1]]
+        owner = np.repeat(np.arange(len(near), dtype=np.int64), count)
+        R = rad[near][owner] - self.evade  # the other futures: the drone evades once they show
+        R[first] = rad[near]
+        G = np.repeat(self.gamma_alt[None], len(owner), axis=0)
+        G[first] = self.gamma
+        return np.ascontiguousarray(O), np.ascontiguousarray(R), G, owner, prior
+
+    def _within_reach(self, p0, v0, centre, speed, keep, rad) -> np.ndarray:
+        """(n,) bool: which obstacles may come within reach of some candidate: a cull by reach, not by count.
+        The drone's candidates move at most max(|v0|, v_max) per axis (each target velocity is clipped to v_max
+        and approached monotonically), so at step k they lie in the box p0 +- that times t_k. An obstacle's
+        futures move at most its own prediction's distance (keep (n, N, 2)) or, the others, at most the
+        largest of its speed and the walking speeds times t_k (stopping is slower, a turn walks at a walking
+        speed at most, one standing speeds up to the lower walking speed), with a radius at most rad (n, N)
+        (evasion shrinks it). One that stays farther than the sum plus the dynamic margin (and a rounding
+        allowance) at every step adds no term to any candidate's cost (_best), so leaving it out changes no
+        choice. NaN: kept."""
+        cfg, t = self.cfg, self.t
+        if len(centre) == 0 or not (cfg.stop_decel > 0 and cfg.start_accel >= 0):
+            return np.ones(len(centre), bool)  # the bounds below assume these (the configuration's limits)
+        vd = np.maximum(np.abs(np.asarray(v0, float)[:2]), abs(self.v_max - 0.01))  # per axis
+        gap = np.maximum(np.abs(centre[:, None, :] - np.asarray(p0, float)[:2]) - vd * t[:, None], 0.0)  # (n, N, 2)
+        gap = np.hypot(gap[..., 0], gap[..., 1])
+        lo, hi = cfg.walk_speed
+        walk = np.maximum(speed, max(abs(lo), abs(hi)))[:, None] * t
+        moved = np.maximum(np.hypot(*(keep - centre[:, None, :]).transpose(2, 0, 1)), walk)
+        reach = (moved + np.maximum(rad, rad - self.evade) + cfg.dynamic_margin) * (1 + 1e-6) + 1e-6
+        return ~np.all(gap > reach, axis=1)
 
     def _completed(self, P, V, A, b: int, v0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Row b of candidates(full=False) as full=True gives it: positions, velocities, accelerations (N, 2)."""

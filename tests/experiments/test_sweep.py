@@ -13,11 +13,13 @@ import subprocess
 import sys
 import time
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from experiments.episode import EpisodeConfig
+import experiments.sweep as sweep_module
 from experiments.sweep import RESULTS, SweepError, junit, parse_seeds, read_results, run_sweep, wilson
 
 # A 320x240 camera with the D435i's field of view (intrinsics scaled from 640x480) keeps episodes cheap.
@@ -584,3 +586,55 @@ def test_a_results_file_that_is_not_utf8_and_too_many_seeds_are_one_line(tmp_pat
     assert "more than 1000000 seeds in all" in err and err.count("\n") == 1
     assert main(["run", "corridor", "--out", ""]) == 2
     assert "--out: an empty path" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name, data, fragment", [
+    ("long line", b'{"seed": 1, "x": "' + b"a" * (5 << 20) + b'"}\n', "line 1: longer than 4 MiB"),
+    ("no newline", b"0" * (5 << 20), "line 1: longer than 4 MiB"),
+    ("huge integer", b'{"seed": ' + b"1" * 5000 + b"}\n", "line 1: Exceeds the limit"),
+    ("latin-1 row", b'{"seed": 0}\n{"seed": 1, "x": "\xe9"}\n', "line 2: not UTF-8 text"),
+])
+def test_results_files_are_read_no_further_than_their_limits(tmp_path, name, data, fragment):
+    path = tmp_path / RESULTS
+    path.write_bytes(data)
+    with pytest.raises(SweepError, match=fragment):
+        read_results(path)
+
+
+def test_a_results_file_that_is_a_device_or_too_large_is_refused(tmp_path, monkeypatch):
+    with pytest.raises(SweepError, match="/dev/zero: not a regular file"):
+        read_results(Path("/dev/zero"))
+    path = tmp_path / RESULTS
+    path.write_text("".join(f'{{"seed": {i}}}\n' for i in range(100)))
+    assert sorted(read_results(path)) == list(range(100))
+    monkeypatch.setattr(sweep_module, "MAX_RESULTS_BYTES", 500)  # the limit itself, small enough to reach here
+    with pytest.raises(SweepError, match="larger than"):
+        read_results(path)
+
+
+_FINISHED_ROW = {"seed": 0, "scenario": "corridor", "perception": "oracle", "static_map": "depth", "frame_latency": 1,
+                 "success": True, "reached_goal": True, "collided": False, "collision_count": 0, "at_fault": False,
+                 "not_at_fault_only": False, "timeout": False, "failure_reason": None, "time_to_goal": 14.7,
+                 "mean_speed": 1.2, "min_clearance": {"static": 0.3, "person": 0.5, "structure": 0.3, "overall": 0.3},
+                 "sim_time": 14.7, "planner_stats": {"fallbacks": 0}}
+
+
+def test_junit_to_a_full_disk_names_the_file_and_a_partial_row_is_one_line(tmp_path, capsys):
+    """A finished sweep (no episode left to run): --junit /dev/full fails on the write, and the one line says
+    which file; a results row without the fields the aggregate reads is one line too, not a traceback."""
+    from experiments.cli import main
+
+    out = tmp_path / "s"
+    out.mkdir()
+    (out / RESULTS).write_text(json.dumps(_FINISHED_ROW) + "\n")
+    argv = ["sweep", "corridor", "--seeds", "0", "--perception", "oracle", "--out", str(out), "--quiet"]
+    assert main(argv + ["--junit", "/dev/full"]) == 2
+    err = capsys.readouterr().err
+    assert "--junit: cannot write /dev/full" in err and err.count("\n") == 1
+    assert main(argv + ["--junit", str(tmp_path / "j.xml")]) == 0 and (tmp_path / "j.xml").exists()
+    capsys.readouterr()
+    partial = {k: v for k, v in _FINISHED_ROW.items() if k != "time_to_goal"}
+    (out / RESULTS).write_text(json.dumps(partial) + "\n")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "not whole episode summaries (KeyError: 'time_to_goal')" in err and err.count("\n") == 1

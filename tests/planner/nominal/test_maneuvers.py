@@ -323,3 +323,117 @@ def test_branch_and_bound_breaks_ties_and_infinities_as_argmin_does():
 def test_maneuver_weights_must_not_be_negative():
     with pytest.raises(ValueError, match="w_near"):
         ManeuverConfig(w_near=-1.0)
+
+
+# --- culls by reach ------------------------------------------------------------------------------------
+
+def _costs_in_kernel_order(k, cfg):
+    """Every candidate's cost J summed as _best sums it without any cull (the same operations in the same
+    order, in Python): what the culled kernel must reproduce bit for bit."""
+    from planner.nominal.maneuvers import _static_terms
+    P, A, O, R, gamma, keep = k["P"], k["A"], k["O"], k["R"], k["gamma"], k["keep"]
+    C, K = P.shape[:2]
+    m_d = cfg.dynamic_margin
+    far = np.where(R + m_d > 0.0, ((R + m_d) * (1.0 + 1e-9)) ** 2, -1.0)
+    out = []
+    for c in range(C):
+        st, g_sum, g_end = _static_terms(P, k["stop"], k["clear"], k["goal"], ORIGIN[0], ORIGIN[1], RES, R_ROBOT,
+                                         cfg.static_margin, cfg.w_hit, cfg.w_static, k["goal_xy"][0],
+                                         k["goal_xy"][1], cfg.near_goal, 0.3, 0.05, c, 0, K + 1, 0.0, 0.0, 0.0)
+        jg = cfg.w_goal * 0.5 * (g_end + g_sum / K)
+        kp = 0.0
+        for j in range(len(keep)):
+            dx, dy = P[c, j, 0] - keep[j, 0], P[c, j, 1] - keep[j, 1]
+            kp += dx * dx + dy * dy
+        kp = cfg.w_keep * kp / len(keep)
+        ef = 0.0
+        for j in range(K):
+            ef += A[c, j, 0] * A[c, j, 0] + A[c, j, 1] * A[c, j, 1]
+        ef = cfg.w_acc * ef / K
+        dyn = 0.0
+        for o in np.unique(k["owner"]):
+            exp, mx = 0.0, 0.0
+            for h in np.flatnonzero(k["owner"] == o):
+                s = 0.0
+                for j in range(K):
+                    dx, dy = P[c, j, 0] - O[h, j, 0], P[c, j, 1] - O[h, j, 1]
+                    d2 = dx * dx + dy * dy
+                    if d2 > far[h, j]:
+                        continue
+                    e = math.sqrt(d2) - R[h, j]
+                    if e < m_d:
+                        v = cfg.w_near * (m_d - e) * (m_d - e)
+                        if e < 0.0:
+                            v += cfg.w_hit
+                        s += gamma[h, j] * v
+                exp += k["prior"][h] * s
+                mx = max(mx, s)
+            dyn += exp + cfg.worst_case * mx
+        out.append(jg + st + dyn + kp + ef)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_reach_cull_leaves_every_cost_bit_for_bit(seed):
+    """Obstacles near some candidates and far from others (some hypotheses culled per block, some kept):
+    the choice and its cost are those of summing every term, to the last bit."""
+    k = _random_case(seed)
+    rng = np.random.default_rng(seed + 10)
+    k["O"] = k["O"] + rng.uniform(-2.5, 2.5, (3, 1, 1, 2)).repeat(9, axis=0).reshape(27, 1, 2)  # spread out
+    k["O"][9:18] += 40.0  # one obstacle beyond every candidate's reach
+    J = _costs_in_kernel_order(k, k["cfg"])
+    for first in (-1, 7):
+        b, cost, _ = _run_best(k, first)
+        assert b == int(np.argmin(J)) and cost == J.min()
+
+
+def test_far_obstacles_are_culled_and_change_nothing():
+    sel = ManeuverSelector()
+    near = [_person(4.0, 0.5, -1.0, 0.0, 1), _person(3.0, -1.0, 0.0, 0.8, 2), _person(6.0, 0.0, 0.0, 0.0, 3)]
+    far = [_person(40.0 + i, (-1) ** i * 1.5, -1.5, 0.0, 10 + i) for i in range(5)]
+    p, v = np.array([2.0, 0.0]), np.array([1.0, 0.0])
+    mask = sel._within_reach(p, v, np.array([[o.center[0], o.center[1]] for o in near + far]),
+                             np.array([np.hypot(*o.velocity[:2]) for o in near + far]),
+                             np.array([o.predict(sel.t)[:, :2] for o in near + far]),
+                             np.full((8, sel.N), 1.0))
+    assert mask.tolist() == [True] * 3 + [False] * 5
+    a = _choose(ManeuverSelector(), p, v, near)
+    b = _choose(ManeuverSelector(), p, v, near[:1] + far[:2] + near[1:] + far[2:])
+    assert a.cost == b.cost and a.parts == b.parts and np.array_equal(a.positions, b.positions)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_an_obstacle_culled_by_reach_is_out_of_reach_of_every_candidate(seed):
+    """The cull's claim itself: every future of an obstacle _within_reach leaves out stays farther than its
+    radius plus the dynamic margin from every candidate at every step (full candidates, every row)."""
+    from planner.nominal.maneuvers import futures
+    rng = np.random.default_rng(seed)
+    sel, cfg = ManeuverSelector(), ManeuverConfig()
+    p, v = np.array([2.0, 0.0]), rng.uniform(-2.5, 2.5, 2)
+    obs = [_person(*(p + rng.uniform(-12, 12, 2)), *rng.uniform(-1.6, 1.6, 2), oid=i) for i in range(300)]
+    rad = np.array([0.5 * min(0.6, cfg.max_extent) + sel.r + o.std_at(sel.t) for o in obs])
+    keep = np.array([o.predict(sel.t)[:, :2] for o in obs])
+    mask = sel._within_reach(p, v, np.array([[o.center[0], o.center[1]] for o in obs]),
+                             np.array([np.hypot(*o.velocity[:2]) for o in obs]), keep, rad)
+    assert 0 < mask.sum() < len(obs)
+    P, _, _ = sel.candidates(p, v, np.array([1.0, 0.0]), np.full((sel.N, 2), 2.0), np.array([3.0, 1.0]))
+    culled = [o for o, m in zip(obs, mask) if not m]
+    paths, _, count = futures(culled, sel.t, cfg)
+    radius = np.repeat(rad[~mask], count, axis=0)  # the largest radius any future has (evasion only shrinks it)
+    gap = np.min(np.linalg.norm(P[:, None] - paths[None], axis=3), axis=0) - radius  # (H, N)
+    assert gap.min() >= cfg.dynamic_margin
+
+
+def test_futures_of_several_obstacles_are_each_ones_own():
+    cfg = ManeuverConfig()
+    t = 0.1 * np.arange(1, 26)
+    obs = [_person(5.0, 0.0, -1.0, 0.0, 1), _person(2.0, 1.0, 0.1, 0.0, 2), _person(3.0, -1.0, 0.0, 2.4, 3),
+           _person(1.0, 1.0, 0.0, 0.0, 4)]  # walking, standing, fast, still: 9 and 10 futures interleaved
+    from planner.nominal.maneuvers import futures
+    paths, w, count = futures(obs, t, cfg)
+    assert count.tolist() == [9, 10, 9, 10]
+    start = 0
+    for ob, n in zip(obs, count):
+        one, wo = hypotheses(ob, t, cfg)
+        assert np.array_equal(paths[start:start + n], one) and np.array_equal(w[start:start + n], wo)
+        start += n
