@@ -142,7 +142,8 @@ def build_report(out: Path, split: str, seeds: list[int], cells: list[Cell], don
             continue
         agg = aggregate(summaries, c.family, c.perception)
         person = [s["min_clearance"]["person"] for s in summaries if s["min_clearance"]["person"] is not None]
-        rows.append({"family": c.family, "people": c.people, "perception": c.perception,
+        rigs = sorted({str(s.get("rig", "front")) for s in summaries})
+        rows.append({"family": c.family, "people": c.people, "perception": c.perception, "rig": ", ".join(rigs),
                      "episodes": agg["episodes"], "rates": agg["rates"],
                      "time_to_goal_median": agg["time_to_goal"].get("median"),
                      "min_person_clearance": _dist(person), "contact_speeds": agg["contact_speeds"],
@@ -167,14 +168,14 @@ def markdown(report: dict) -> str:
          + (f" Planner: {report['planner']}." if report.get("planner") else "")
          + (" Configuration overrides: " + ", ".join(f"{k}={v}" for k, v in report["config"]["set"].items()) + "."
             if report.get("config") else ""), "",
-         "| family | people | perception | n | success | at-fault collision | only not-at-fault collisions | "
+         "| family | people | perception | rig | n | success | at-fault collision | only not-at-fault collisions | "
          "timeout | median time to goal [s] | closest to a person, p5 / median [m] |",
-         "|---|---|---|---|---|---|---|---|---|---|"]
+         "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in report["cells"]:
         cl = r["min_person_clearance"]
         close = f"{cl['p5']:.2f} / {cl['median']:.2f}" if cl.get("n") else "-"
         ttg = "-" if r["time_to_goal_median"] is None else f"{r['time_to_goal_median']:.1f}"
-        L.append(f"| {r['family']} | {r['people']} | {r['perception']} | {r['episodes']} | "
+        L.append(f"| {r['family']} | {r['people']} | {r['perception']} | {r.get('rig', 'front')} | {r['episodes']} | "
                  + " | ".join(_pct(r["rates"][k]) for k in REPORTED) + f" | {ttg} | {close} |")
     speeds = [(r, k, v) for r in report["cells"] for k, v in r["contact_speeds"].items()]
     if speeds:

@@ -388,7 +388,9 @@ def aggregate(summaries: list[dict], scenario: str, perception: str, planner: st
         recorded = next((s["config"] for s in summaries if s.get("config")), None)
         extra["config"] = recorded if settings else {}
     return {
-        "scenario": scenario, "perception": perception, **extra, "episodes": n, "rates": rates,
+        "scenario": scenario, "perception": perception,
+        "rig": ", ".join(sorted({str(s.get("rig", "front")) for s in summaries})) or None, **extra,
+        "episodes": n, "rates": rates,
         "contact_speeds": contact_speeds(summaries),
         "time_to_goal": _dist(s["time_to_goal"] for s in summaries),
         "mean_speed": _dist(s["mean_speed"] for s in summaries if s["reached_goal"]),
