@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from experiments.cli import main
+from cli_in_process import run_main
 from sim.scenario import MAX_OBSTACLES, MAX_PEOPLE, MAX_POINTS, parse_scenario
 
 NAN, INF = math.nan, math.inf
@@ -247,10 +247,7 @@ def test_the_corpus_is_large():
 def _cli(args: list[str], capsys) -> tuple[int, str]:
     """main(args) in this process: (exit status, stderr). An exception escaping it fails the test (it
     would be a traceback)."""
-    try:
-        code = main(args)
-    except SystemExit as e:  # argparse's refusals
-        code = e.code
+    code = run_main(args)
     out = capsys.readouterr()
     return code, out.err
 
