@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata
+import os
 import signal
 import sys
 import threading
@@ -70,8 +71,36 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _terminated(signum, frame):
-    raise SystemExit(128 + signum)
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where it arrives as Ctrl-C's KeyboardInterrupt is, so that it goes where Ctrl-C goes: past
+    the guards around plug-ins and modules (which contain everything else a module raises, SystemExit too)
+    and through the finally blocks that close what the command started."""
+
+
+class _Stop:
+    """The handler of SIGINT and SIGTERM while a command runs. The first signal stops the command in order:
+    KeyboardInterrupt (SIGINT) or Terminated (SIGTERM) is raised where it arrives. A second signal, while
+    the command closes what it started (or when something swallowed the first), ends the process at once
+    with 128 + the signal's number; its children end themselves then (sim.parent_watch)."""
+
+    def __init__(self):
+        self.signum = None
+
+    def __call__(self, signum, frame):
+        if self.signum is not None:
+            os.write(2, b"dodt-nav: interrupted again; stopped at once\n")
+            os._exit(128 + signum)
+        self.signum = signum
+        raise KeyboardInterrupt if signum == signal.SIGINT else Terminated
+
+
+def _handle_signals(stop: _Stop) -> dict:
+    """Installs ``stop`` for SIGTERM, and for SIGINT unless the process was started with SIGINT ignored (a
+    shell's background job: Ctrl-C is not meant for it); the handlers it replaced."""
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, stop)}
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, stop)
+    return previous
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,10 +110,11 @@ def main(argv: list[str] | None = None) -> int:
         return e.code if isinstance(e.code, int) else 2
     # SIGTERM (kill, a job scheduler) ends the command as Ctrl-C does: through its finally blocks, which
     # close what it started (a render process, a viewer's server, a sweep's workers). Those also end on
-    # their own when this process is gone (SIGKILL): sim.parent_watch.
-    previous = None
+    # their own when this process is gone (SIGKILL, a second signal): sim.parent_watch.
+    stop = _Stop()
+    previous = {}
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _terminated)
+        previous = _handle_signals(stop)
     try:
         return args.func(args)
     except (ScenarioError, UserError, ModelError, SequenceError) as e:
@@ -94,16 +124,22 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{e.filename}: " if e.filename else ""
         print(f"dodt-nav: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("dodt-nav: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("dodt-nav: interrupted", file=sys.stderr)
-        return 130
+        return 128 + signal.SIGINT
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        # After a signal its handler stays: a second one while the interpreter ends (joining a pool's threads,
+        # closing children) ends the process at once instead of printing a traceback from that clean-up.
+        if stop.signum is None:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
 
 
 if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["main", "build_parser", "UserError"]
+__all__ = ["main", "build_parser", "UserError", "Terminated"]

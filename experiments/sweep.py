@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import sys
 import time
 import xml.etree.ElementTree as ET
@@ -264,10 +265,12 @@ def _exit_with_parent(parent_pid: int) -> None:
     (sim.parent_watch). A sweep killed alone (kill PID, a job scheduler's SIGTERM or SIGKILL to the main
     process) otherwise leaves its workers running: each finishes its episode and the ones queued behind it,
     results nobody writes, then sleeps for good holding its memory (seen: orphans alive 50 minutes after
-    their sweep, 0.6 GB each)."""
+    their sweep, 0.6 GB each). Ctrl-C, which a terminal sends to every process of the sweep, is ignored
+    here: the sweep ends its workers then (a KeyboardInterrupt in each would print a traceback)."""
     from sim.parent_watch import exit_with_parent
 
     exit_with_parent(parent_pid)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def run_tasks(tasks: list[tuple], jobs: int, dask_address: str | None, finished) -> None:

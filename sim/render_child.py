@@ -7,6 +7,7 @@ only the child runs it, so the parent's side does not depend on sim.world.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import traceback
 from multiprocessing.connection import Connection
@@ -37,14 +38,17 @@ def serve_world(conn, scenario, seed, renderer, segmentation, light_direction, c
         world = World(scenario, seed=seed, renderer=renderer, segmentation=segmentation,
                       light_direction=light_direction, color=color)
     except Exception as e:  # noqa: BLE001 - reported to the parent, which raises it
-        conn.send(("error", f"{type(e).__name__}: {e}"))
+        try:
+            conn.send(("error", f"{type(e).__name__}: {e}"))
+        except OSError:  # the parent gave up on this child while it built the world
+            pass
         return False
-    conn.send(("ready", world.renderer))
     # The frame reset() rendered (t = 0, the start pose) answers frame 0: the EGL renderer's first frames are
     # not all alike (the same pose's colour differed between a first and a later render), so the child renders
     # exactly the frames the parent would, in the same order.
     first = world.last_images
     try:
+        conn.send(("ready", world.renderer))  # (the parent may have ended this child meanwhile: OSError)
         while True:
             msg = conn.recv()
             if msg is None:
@@ -75,6 +79,9 @@ def serve_world(conn, scenario, seed, renderer, segmentation, light_direction, c
 
 if __name__ == "__main__":  # python -m sim.render_child FD PARENT_PID
     exit_with_parent(int(sys.argv[2]))
+    # Ctrl-C in a terminal signals the whole process group: the parent handles it and ends this child by
+    # closing its end of the socket; a KeyboardInterrupt here (building a world) would only print a traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     serve(Connection(int(sys.argv[1])))
     # Leave without the interpreter's teardown: with llvmpipe's threads it can hang after EGL was used.
     os._exit(0)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import time
 
 
@@ -55,3 +56,13 @@ def wait_for(predicate, timeout: float, period: float = 0.05) -> bool:
             return False
         time.sleep(period)
     return True
+
+
+def kill_group(p) -> None:
+    """SIGKILL to whatever is left of the process group that subprocess ``p`` leads (started with
+    ``start_new_session=True``), then reaps ``p``."""
+    try:
+        os.killpg(p.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    p.wait(timeout=30)

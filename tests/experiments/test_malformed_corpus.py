@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from experiments.cli import main
+from cli_in_process import run_main
 from sim.scenario import MAX_OBSTACLES, MAX_PEOPLE, MAX_POINTS, parse_scenario
 
 NAN, INF = math.nan, math.inf
@@ -247,10 +247,7 @@ def test_the_corpus_is_large():
 def _cli(args: list[str], capsys) -> tuple[int, str]:
     """main(args) in this process: (exit status, stderr). An exception escaping it fails the test (it
     would be a traceback)."""
-    try:
-        code = main(args)
-    except SystemExit as e:  # argparse's refusals
-        code = e.code
+    code = run_main(args)
     out = capsys.readouterr()
     return code, out.err
 
@@ -265,21 +262,30 @@ def _assert_one_line(code: int, err: str, *names: str) -> None:
     assert len(lines[0]) < 1000, lines[0][:300]
 
 
+@pytest.fixture(scope="module")
+def case_dir(tmp_path_factory):
+    """One folder for the scenario cases, each its own file and output name in it (a folder per case
+    cost more than most cases)."""
+    return tmp_path_factory.mktemp("malformed")
+
+
 @pytest.mark.parametrize("case", range(len(CASES)), ids=[c[0] for c in CASES])
-def test_a_malformed_scenario_exits_2_naming_the_file_and_key(case, tmp_path, capsys):
+def test_a_malformed_scenario_exits_2_naming_the_file_and_key(case, case_dir, capsys):
     _, data, key = CASES[case]
-    path = tmp_path / "case.toml"
+    path = case_dir / f"case{case}.toml"
     if isinstance(data, bytes):
         path.write_bytes(data)
     else:
         path.write_text(to_toml(data))
     # the scenario is read by every command that takes one; validate, run and sweep take turns
+    out = case_dir / f"out{case}"
     command = [["validate", str(path)],
-               ["run", str(path), "--out", str(tmp_path / "out"), "--perception", "oracle"],
-               ["sweep", str(path), "--out", str(tmp_path / "out"), "--seeds", "0:2", "--jobs", "1", "--quiet"]]
+               ["run", str(path), "--out", str(out), "--perception", "oracle"],
+               ["sweep", str(path), "--out", str(out), "--seeds", "0:2", "--jobs", "1", "--quiet"]]
     code, err = _cli(command[case % 3], capsys)
+    path.unlink()  # (the largest are megabytes)
     _assert_one_line(code, err, f"{path}: {key}" if key else str(path))
-    assert not (tmp_path / "out").exists()  # refused before any work
+    assert not out.exists()  # refused before any work
 
 
 @pytest.mark.parametrize("path", ["/dev/zero", "/dev/urandom", "/proc/self/mem", "/"])

@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from experiments.meshcat_server import start_meshcat_server
-from processes import alive, children, descendants, wait_for
+from processes import alive, children, descendants, kill_group, wait_for
 
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads the process table from /proc")
 
@@ -66,11 +66,7 @@ def test_the_live_viewer_server_ends_with_a_killed_run_and_frees_its_ports(tmp_p
             f"{[p for p in below if alive(p)]} outlived the run by 10 s"
         assert wait_for(lambda: all(_port_free(p) for p in ports), timeout=10), ports
     finally:
-        try:
-            os.killpg(run.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        run.wait(timeout=30)
+        kill_group(run)
 
 
 def test_a_server_that_does_not_start_in_time_is_stopped(monkeypatch):

@@ -13,7 +13,7 @@ import re
 
 import pytest
 
-from experiments.cli import main
+from cli_in_process import run_main
 
 TRACEBACK = "Traceback (most recent call last)"
 
@@ -42,10 +42,7 @@ def no_work(monkeypatch):
 def cli(args: list[str], capsys) -> tuple[int, str, str]:
     """main(args) in this process: (exit status, stderr, stdout). Any other exception escaping main fails
     the test: it would have been a traceback."""
-    try:
-        code = main([str(a) for a in args])
-    except SystemExit as e:
-        code = e.code if isinstance(e.code, int) else 2
+    code = run_main(args)
     out = capsys.readouterr()
     return code, out.err, out.out
 

@@ -90,8 +90,10 @@ def _write(tmp: Path, data: str | bytes, body: str) -> Path:
 
 
 def _load_ids():
-    return [(c, role, cmd) for c in range(len(LOAD_CASES)) for role in ("planner", "perception")
-            for cmd in ("run", "sweep", "benchmark", "reproduce")]
+    """(case, role, command): each case in each role by two commands; the two roles together take all four."""
+    cmds = ("run", "sweep", "benchmark", "reproduce")
+    return [(c, role, cmds[(c + r + k) % len(cmds)]) for c in range(len(LOAD_CASES))
+            for r, role in enumerate(("planner", "perception")) for k in (0, 2)]
 
 
 LOAD_IDS = _load_ids()

@@ -3,8 +3,9 @@ given values of the wrong type, not finite, out of its range; malformed assignme
 that are not text, not TOML, too large, too deep, or a device. Each is refused in one line naming the key
 (or the file) before any work starts.
 
-The keys come from experiments.config_limits.LIMITS (every key of the built-in sections); each key gets a
-few bad values chosen by its kind, and the commands take turns so that every command's path is tried.
+The keys come from experiments.config_limits.LIMITS (every key of the built-in sections); each key gets one
+bad value, keys alike taking turns through the bad values of their kind, and the commands take turns so
+that every command's path is tried.
 """
 from __future__ import annotations
 
@@ -49,20 +50,23 @@ COMMANDS = {
     "benchmark": lambda out: ["benchmark", "nav", "--out", out, "--quick", "--quiet"],
     "reproduce": lambda out: ["reproduce", "--out", out, "--quick"],
 }
-PER_KEY = 2  # values tried per key (taking turns through its list, so every kind of bad value is used)
 
 
 def _set_cases() -> list[tuple[str, str, str, str]]:
-    """(id, command, --set text, the key the error must name)."""
-    cases, turn = [], 0
+    """(id, command, --set text, the key the error must name): one bad value per key. Keys whose values
+    are alike (the same kind, the same list of bad values) take turns through that list, so every kind of
+    bad value is tried; the commands take turns over all keys."""
+    cases, turns = [], {}
     names = list(COMMANDS)
-    for key, lim in sorted(LIMITS.items()):
+    for n, (key, lim) in enumerate(sorted(LIMITS.items())):
         values = _bad_values(lim)
-        for j in range(PER_KEY):
-            v = values[(turn + j) % len(values)]
-            cmd = names[(turn + j) % len(names)]
-            cases.append((f"{cmd} {key}={v}", cmd, f"{key}={v}", key))
-        turn += 1
+        shape = (lim.kind, lim.integer, lim.lo_open, lim.length is not None, len(values))
+        turn = turns[shape] = turns.get(shape, -1) + 1
+        v = values[turn % len(values)]
+        cmd = names[n % len(names)]
+        if key.startswith("oracle.") and cmd == "reproduce":  # reproduce runs DODT and the oracle together
+            cmd = names[0]
+        cases.append((f"{cmd} {key}={v}", cmd, f"{key}={v}", key))
     return cases
 
 
@@ -83,15 +87,29 @@ def test_the_set_corpus_covers_every_key():
     assert len({c[0] for c in SET_CASES}) == len(SET_CASES)
 
 
+def test_the_set_corpus_tries_every_kind_of_bad_value_on_every_command():
+    values = {c[2].split("=", 1)[1] for c in SET_CASES}
+    for kind in ("nan", "inf", "-inf", "1e308", "-1e308", '"abc"', "true", "{a = 1}", "1", '"yes"', "[true]",
+                 "{a = true}", "5", "[1, 2]", '"not-a-choice"', '""', "[]", "[[1.0]]"):
+        assert kind in values, kind
+    assert any(v.endswith(".5") for v in values)  # a fraction for a whole number
+    assert any(v.startswith("[nan") for v in values)  # a list holding NaN
+    assert {c[1] for c in SET_CASES} == set(COMMANDS)
+
+
+@pytest.fixture(scope="module")
+def outs(tmp_path_factory):
+    """A folder for the output folders the --set cases name (each its own; none may be made)."""
+    return tmp_path_factory.mktemp("set")
+
+
 @pytest.mark.parametrize("case", SET_CASES, ids=[c[0] for c in SET_CASES])
-def test_a_bad_set_value_is_one_line_naming_the_key(case, tmp_path, capsys, no_work):
+def test_a_bad_set_value_is_one_line_naming_the_key(case, outs, capsys, no_work):
     _, cmd, assignment, key = case
-    if key.startswith("oracle.") and cmd == "reproduce":
-        pytest.skip("reproduce runs DODT and the oracle together")
-    out = str(tmp_path / "out")
-    code, err, _ = cli(COMMANDS[cmd](out) + _extra(cmd, key) + ["--set", assignment], capsys)
+    out = outs / f"out{SET_CASES.index(case)}"
+    code, err, _ = cli(COMMANDS[cmd](str(out)) + _extra(cmd, key) + ["--set", assignment], capsys)
     assert_refused(code, err, key, status=2)
-    assert not (tmp_path / "out").exists()
+    assert not out.exists()
 
 
 # --------------------------------------------------------------------------- malformed assignments
@@ -196,8 +214,12 @@ CONFIG_PATHS = [("missing", "NOWHERE/c.toml", "no such file"), ("folder", "TMP",
                 ("proc", "/proc/self/mem", "/proc/self/mem"), ("empty name", "", "--config")]
 
 
-@pytest.mark.parametrize("case", CONFIG_FILES, ids=[c[0] for c in CONFIG_FILES])
-@pytest.mark.parametrize("cmd", list(COMMANDS))
+# Each file is given to two commands, the commands taking turns over the files.
+CONFIG_CASES = [(case, list(COMMANDS)[(i + j) % len(COMMANDS)]) for i, case in enumerate(CONFIG_FILES)
+                for j in (0, 1)]
+
+
+@pytest.mark.parametrize("case,cmd", CONFIG_CASES, ids=[f"{c[0]}-{cmd}" for c, cmd in CONFIG_CASES])
 def test_a_bad_config_file_is_one_line_naming_it(case, cmd, tmp_path, capsys, no_work):
     _, data, name = case
     path = tmp_path / "c.toml"
@@ -224,5 +246,5 @@ def test_a_config_path_that_is_no_file_is_one_line(case, cmd, tmp_path, capsys, 
 
 
 def test_the_settings_corpus_is_large():
-    n = len(SET_CASES) + 2 * len(MALFORMED_SETS) + len(COMMANDS) * len(CONFIG_FILES) + 2 * len(CONFIG_PATHS)
+    n = len(SET_CASES) + 2 * len(MALFORMED_SETS) + len(CONFIG_CASES) + 2 * len(CONFIG_PATHS)
     assert n >= 450
