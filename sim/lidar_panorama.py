@@ -106,16 +106,17 @@ def _inverse_depth(img, u, v, near, far):
 
 
 @njit(cache=True, nogil=True)
-def _edge_normal(img, uc, vc, fx, fy, cx, cy, near, far):
-    """The unit normal (optical frame, not yet oriented) at pixel (uc, vc) from its own surface: of its left and
-    right neighbours the one nearer in depth, likewise above and below; zeros where it has none on either
-    side."""
+def _edge_normal(img, uc, vc, fx, fy, cx, cy, near, far, c):
+    """The unit normal (optical frame, not yet oriented) at pixel (uc, vc) from its own surface, written into
+    ``c`` (3,): of its left and right neighbours the one nearer in depth, likewise above and below; zeros
+    where it has none on either side."""
     H, W = img.shape
     wc = _inverse_depth(img, uc, vc, near, far)
     zc = 1.0 / wc
-    best = np.zeros((2, 3))
+    a0 = a1 = a2 = b0 = b1 = b2 = 0.0
     for axis in range(2):
         gap = np.inf
+        e0 = e1 = e2 = 0.0
         for step in (-1, 1):
             un, vn = (uc + step, vc) if axis == 0 else (uc, vc + step)
             if un < 0 or vn < 0 or un >= W or vn >= H:
@@ -125,15 +126,22 @@ def _edge_normal(img, uc, vc, fx, fy, cx, cy, near, far):
                 continue
             gap = abs(1.0 / wn - zc)
             zn = 1.0 / wn
-            best[axis, 0] = (un - cx) / fx * zn - (uc - cx) / fx * zc
-            best[axis, 1] = (vn - cy) / fy * zn - (vc - cy) / fy * zc
-            best[axis, 2] = zn - zc
+            e0 = (un - cx) / fx * zn - (uc - cx) / fx * zc
+            e1 = (vn - cy) / fy * zn - (vc - cy) / fy * zc
+            e2 = zn - zc
         if gap == np.inf:
-            return np.zeros(3)
-    a, b = best[0], best[1]
-    c = np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-    norm = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
-    return c / norm if norm > 0.0 else np.zeros(3)
+            c[0], c[1], c[2] = 0.0, 0.0, 0.0
+            return
+        if axis == 0:
+            a0, a1, a2 = e0, e1, e2
+        else:
+            b0, b1, b2 = e0, e1, e2
+    x, y, z = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    norm = math.sqrt(x * x + y * y + z * z)
+    if norm > 0.0:
+        c[0], c[1], c[2] = x / norm, y / norm, z / norm
+    else:
+        c[0], c[1], c[2] = 0.0, 0.0, 0.0
 
 
 @njit(cache=True, nogil=True)
@@ -186,7 +194,7 @@ def _lookup(zbuf, dirs, R_views, R_world, fx, fy, cx, cy, near, far, reach, tol)
             j = int(fu >= 0.5) + 2 * int(fv >= 0.5)
             wi = w[j]
             if wi > 0.0:
-                c[:] = _edge_normal(img, u0 + (j & 1), v0 + (j >> 1), fx, fy, cx, cy, near, far)
+                _edge_normal(img, u0 + (j & 1), v0 + (j >> 1), fx, fy, cx, cy, near, far, c)
         if wi <= 0.0 or 1.0 / wi / Z > reach:
             continue
         out[i] = 1.0 / wi / Z
