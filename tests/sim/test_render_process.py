@@ -113,6 +113,7 @@ def test_a_render_process_whose_reply_was_cut_short_is_ended_not_released():
     assert all(p is not proc for p, _ in render_process._IDLE)
 
 
+@pytest.mark.slow
 def test_the_longest_latency_with_a_crowd_does_not_hang():
     """frame_latency 100 (the most a run takes) with 30 walkers: a hundred requests in flight, each with
     30 poses, and the child's answers, whole images, once filled the socket both ways and both processes

@@ -402,7 +402,7 @@ def test_far_obstacles_are_culled_and_change_nothing():
     assert a.cost == b.cost and a.parts == b.parts and np.array_equal(a.positions, b.positions)
 
 
-@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)])
 def test_an_obstacle_culled_by_reach_is_out_of_reach_of_every_candidate(seed):
     """The cull's claim itself: every future of an obstacle _within_reach leaves out stays farther than its
     radius plus the dynamic margin from every candidate at every step (full candidates, every row)."""
