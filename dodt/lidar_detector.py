@@ -20,8 +20,9 @@ Kalman tracking. Ours, per scan (``LidarDetector.__call__``):
    scan's lowest ray reaches at the cluster's near side is taken to reach the floor (its box extended to
    it), as the camera's moving-track rule does for boxes cut by the image's lower edge.
 
-Returns ``Detection``s with ``source = "lidar"`` (world boxes and their points) and the filtered cloud
-(the voxel-filtered points of step 3, before clustering), which dynamic identification may vote with.
+Returns ``Detection``s with ``source = "lidar"`` (world boxes and their points) and keeps the filtered
+cloud (the voxel-filtered points of step 3, before clustering) as ``last_cloud``, which dynamic
+identification votes with.
 """
 from __future__ import annotations
 
@@ -78,7 +79,7 @@ class LidarDetector:
     def __call__(self, scan: LidarScan, static_map=None, geofence=None,
                  elevation_min: float | None = None) -> list[Detection]:
         """Boxes of the obstacles in ``scan``; ``static_map``: a dodt.context.StaticMapView (or None),
-        ``geofence``: ((x, y) low, (x, y) high) whose y sides are walls (or None), ``elevation_min``: the
+        ``geofence``: ((x, y) low, (x, y) high) whose sides are walls (or None), ``elevation_min``: the
         lowest ray's elevation [rad] in the sensor frame (None: no box is extended to the floor)."""
         c = self.cfg
         cloud = self.filtered_points(scan, geofence)

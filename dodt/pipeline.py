@@ -14,10 +14,11 @@ is a stamp that jumps ahead by more than ``depth.max_time_jump``, until
 tracks; a gap longer than the coasting time restarts the tracks).
 Every history window is a span of time (dodt.config), so any frame rate works with one
 configuration.
-With a LiDAR (a rig's): a scan handed to ``observe_lidar`` joins the next frame's detections
-(dodt.lidar_detector's boxes of what the camera's detectors did not find, LV-DOT's LiDAR-visual
-ensemble), so that obstacles beside and behind the camera are measured by the same tracker; tracks a
-LiDAR box updated are identified by their filtered speed (no depth image of them to vote with).
+On a rig (docs/sensing.md): a LiDAR scan handed to ``observe_lidar`` and the other cameras' frames
+handed to ``observe_cameras`` join the next frame's detections (dodt.lidar_detector's boxes of what the
+cameras' detectors did not find, LV-DOT's LiDAR-visual ensemble), so that obstacles beside and behind
+the camera are measured by the same tracker; a track votes in the view of the sensor that measured it
+(dodt.tracker).
 The learned person detector (YOLO-MAD, dodt.learned) runs when ``cfg.learned.enabled``; any
 callable (frame, depth_m, ensemble_detections) -> detections can stand in for it through
 ``learned_detector``. Its time is the "learned" module's.
@@ -101,6 +102,13 @@ def _footprints_meet(a: Detection, b: Detection, grow: float) -> bool:
     return bool(np.all(np.abs(a.center[:2] - b.center[:2]) <= (a.size[:2] + b.size[:2]) / 2 + grow))
 
 
+def _with_points(dets: list[Detection], points: np.ndarray) -> None:
+    """Every detection carries the filtered points inside its box: its features and votes."""
+    for d in dets:
+        if len(d.points) == 0 and len(points):
+            d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
+
+
 def mark_cut(dets: list[Detection], K, T_world_camera: np.ndarray) -> None:
     """Set each detection's ``cut``: its box crosses the image's left or right edge."""
     for d in dets:
@@ -171,7 +179,7 @@ class DODT:
 
     def set_scene(self, static_map=None, geofence=None, lidar_elevation_min: float | None = None) -> None:
         """What the LiDAR detector knows of the scene (dodt.lidar_detector): the static map
-        (a dodt.context.StaticMapView), the geofence ((x, y) low, (x, y) high; its y sides are walls),
+        (a dodt.context.StaticMapView), the geofence ((x, y) low, (x, y) high; its sides are walls),
         the LiDAR's lowest ray's elevation [rad]."""
         self._lidar_view = (static_map, geofence, lidar_elevation_min)
 
@@ -237,21 +245,30 @@ class DODT:
         return out
 
     def _depth_detections(self, frame, depth_m, T, points) -> list[Detection]:
-        """The depth detectors' ensemble on another camera's frame (no learned detector: no colour)."""
+        """The depth detectors' ensemble on another camera's frame (``_detect``'s, without the learned
+        detector: no colour)."""
         cfg = self.cfg.ensemble
         ud = self.udepth(depth_m, frame.intrinsics, T) if "udepth" in cfg.detectors else []
         db = self.dbscan(points) if "dbscan" in cfg.detectors else []
-        if cfg.complete_depth > 0:
-            for d in ud + db:
-                d.center, d.size = complete_hidden_depth(d.center, d.size, T[:3, 3], cfg.complete_depth)
-        if len(cfg.detectors) == 2:
-            dets = ensemble(ud, db, cfg)
-        else:
-            dets = ud if cfg.detectors == ("udepth",) else db
-        for d in dets:
-            if len(d.points) == 0 and len(points):
-                d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
+        self._complete(ud + db, T)
+        dets = self._ensemble(ud, db)
+        _with_points(dets, points)
         return dets
+
+    def _complete(self, dets: list[Detection], T: np.ndarray) -> None:
+        """Give each box the depth the camera cannot see (ensemble.complete_depth), before fusion, so that
+        both detectors' boxes have volume."""
+        depth = self.cfg.ensemble.complete_depth
+        if depth > 0:
+            for d in dets:
+                d.center, d.size = complete_hidden_depth(d.center, d.size, T[:3, 3], depth)
+
+    def _ensemble(self, ud: list[Detection], db: list[Detection]) -> list[Detection]:
+        """The detectors' boxes as the configuration combines them (the paper's ensemble, or one alone)."""
+        cfg = self.cfg.ensemble
+        if len(cfg.detectors) == 2:
+            return ensemble(ud, db, cfg)
+        return ud if cfg.detectors == ("udepth",) else db
 
     # ------------------------------------------------------------------ helpers
 
@@ -269,22 +286,14 @@ class DODT:
         ud = self.udepth(depth_m, frame.intrinsics, T) if "udepth" in cfg.detectors else []
         t1 = time.perf_counter()
         db = self.dbscan(points) if "dbscan" in cfg.detectors else []
-        if cfg.complete_depth > 0:  # before fusion, so that both detectors' boxes have volume
-            for d in ud + db:
-                d.center, d.size = complete_hidden_depth(d.center, d.size, T[:3, 3], cfg.complete_depth)
+        self._complete(ud + db, T)
         t2 = time.perf_counter()
-        if len(cfg.detectors) == 2:
-            dets = ensemble(ud, db, cfg)
-        else:
-            dets = ud if cfg.detectors == ("udepth",) else db
+        dets = self._ensemble(ud, db)
         t3 = time.perf_counter()
         if self.learned_detector is not None:
             dets = self.learned_detector(frame, depth_m, dets)
         t4 = time.perf_counter()
-        # Every detection carries the filtered points inside its box: its features and votes.
-        for d in dets:
-            if len(d.points) == 0 and len(points):
-                d.points = points[points_in_box(points, d.center, d.size, grow=0.05)]
+        _with_points(dets, points)
         if self.learned_detector is not None and not self.cfg.learned.cut_boxes_vote:
             mark_cut(dets, frame.intrinsics, T)
         if self.cfg.kalman.cut_half_width > 0:
@@ -360,7 +369,8 @@ class DODT:
             tr.identify(seq, self.poses, self.clouds.get, frame.intrinsics, self.cfg.depth.depth_max, self.lidar_clouds,
                         {k: (v[0], v[1].get, v[2]) for k, v in self.other_views.items()})
         t3 = time.perf_counter()
-        timings = {"point_cloud": t_cloud, **debug["timings"], "other_cameras": t_other, "lidar": t_lidar, "association": (t1 - t0) * 1e3,
+        timings = {"point_cloud": t_cloud, **debug["timings"], "other_cameras": t_other, "lidar": t_lidar,
+                   "association": (t1 - t0) * 1e3,
                    "kalman": (t2 - t1) * 1e3, "identification": (t3 - t2) * 1e3,
                    "total": (t3 - t_start) * 1e3}
         debug["lidar"], debug["other_cameras"] = lidar_dets, other_dets
