@@ -14,7 +14,7 @@ import numpy as np
 from dodt.frames import CameraIntrinsics
 from sim.frame_capture import ImageFinisher
 from sim.gl_renderer import GLRenderer
-from sim.rig import yaw_matrix
+from sim.rig import camera_mount
 
 EXTRA_CAMERA_SEED_TAG = 0x43414D  # "CAM": the extra cameras' noise streams, apart from every other
 
@@ -27,14 +27,10 @@ class ExtraCameras:
     def __init__(self, p, client: int, K: CameraIntrinsics, camera, noise, seed: int, yaws, T_body_camera):
         self.K = K
         self.yaws = tuple(float(y) for y in yaws)
-        T_bc = np.asarray(T_body_camera, dtype=np.float64)
-        self.T_body_cameras = []
-        for y in self.yaws:
-            T = np.eye(4)
-            R = yaw_matrix(y)
-            T[:3, :3] = R @ T_bc[:3, :3]
-            T[:3, 3] = R @ T_bc[:3, 3]
-            self.T_body_cameras.append(T)
+        self.T_body_cameras = [camera_mount(T_body_camera, y) for y in self.yaws]
+        # each camera in the first camera's frame: the pose its frames carry is the first's times this
+        T_camera_body = np.linalg.inv(np.asarray(T_body_camera, dtype=np.float64))
+        self.T_first_cameras = [T_camera_body @ T for T in self.T_body_cameras]
         streams = np.random.SeedSequence([int(seed), EXTRA_CAMERA_SEED_TAG]).spawn(len(self.yaws))
         no_segmentation = np.full(1, -1, np.int64)
         self._finish = [ImageFinisher(camera, noise, np.random.default_rng(s), no_segmentation, False)
@@ -44,8 +40,9 @@ class ExtraCameras:
     def release(self) -> None:
         self._renderer.release()
 
-    def render(self, T_world_body: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Each camera's depth (uint16 mm, with its noise) with the body at ``T_world_body``, as posed now."""
+    def render(self, T_world_body: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """Each camera's (depth (uint16 mm, with its noise), its pose in the first camera's frame) with the
+        body at ``T_world_body``, as posed now."""
         T = np.asarray(T_world_body, dtype=np.float64)
         zbufs = self._renderer.render_depth_views([T @ Tbc for Tbc in self.T_body_cameras])
-        return tuple(f(None, z, None)[0] for f, z in zip(self._finish, zbufs))
+        return tuple((f(None, z, None)[0], T_rel) for f, z, T_rel in zip(self._finish, zbufs, self.T_first_cameras))

@@ -28,12 +28,12 @@ import numpy as np
 from numba import njit
 
 from dodt.frames import CameraIntrinsics
+from dodt.lidar_views import view_rotations
 from sim.gl_renderer import GLRenderer
 from sim.lidar import LidarModel
 
 MARGIN_PX = 2  # pixels around each image beyond the field it must cover: bilinear lookups stay inside
 PLANE_TOLERANCE = 2e-3  # the four pixels lie on one plane when their inverse depths do, to this share
-R_FLU_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # sensor FLU <- optical
 
 
 class PanoramaCaster:
@@ -64,12 +64,7 @@ class PanoramaCaster:
         self.near = model.min_range / corner * 0.5
         self.far = model.max_range
         # R_sensor_view for each view: the optical frame turned about the sensor's z axis by 2 pi k / views
-        self._R = []
-        for k in range(self.views):
-            a = 2 * math.pi * k / self.views
-            Rz = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-            self._R.append(Rz @ R_FLU_OPTICAL)
-        self._R = np.array(self._R)
+        self._R = view_rotations(self.views)
         self._renderer = GLRenderer(p, client, self.K, near=self.near, far=self.far, depth_bits=24)
 
     def release(self) -> None:

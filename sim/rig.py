@@ -54,6 +54,21 @@ def yaw_matrix(yaw_deg: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+def camera_mount(T_body_camera: np.ndarray, yaw_deg: float) -> np.ndarray:
+    """(4, 4) a camera mounted like ``T_body_camera``, turned about the body's z axis by ``yaw_deg``."""
+    T = np.eye(4)
+    R = yaw_matrix(yaw_deg)
+    T_bc = np.asarray(T_body_camera, dtype=np.float64)
+    T[:3, :3] = R @ T_bc[:3, :3]
+    T[:3, 3] = R @ T_bc[:3, 3]
+    return T
+
+
+def frames_per_scan(camera_rate: float, model: LidarModel) -> int:
+    """Camera frames per LiDAR scan: the loop scans every this many frames."""
+    return max(1, int(round(camera_rate / model.scan_rate)))
+
+
 RIGS: dict[str, tuple[SensorMount, ...]] = {
     "front": (SensorMount("camera", "front"),),
     "front_back": (SensorMount("camera", "front"), SensorMount("camera", "back", 180.0)),

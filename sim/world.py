@@ -40,11 +40,12 @@ from sim.contacts import CLEARANCE_CAP, CLEARANCE_LOG_LEN, ContactMonitor
 from sim.controller import CascadedController, DroneState, Reference
 from sim.crowd import Crowd
 from sim.depth_noise import DepthNoiseModel
+from sim.extra_cameras import ExtraCameras
 from sim.frame_capture import Capture, FrameQueue, ImageFinisher
+from sim.gl_renderer import GLUnavailable
 from sim.ground_truth import GroundTruth, ObstacleTruth
 from sim.lidar import LidarModel, simulate_scan, top_mount
 from sim.lidar_panorama import PanoramaCaster
-from sim.extra_cameras import ExtraCameras
 from sim.odometry import OdometryNoise
 from sim.render_backend import RenderBackend
 from sim.rotors import Rotors
@@ -123,6 +124,7 @@ class World:
         self._client = self._query_client = None
         self._lidar_panorama = None  # (model, sim.lidar_panorama.PanoramaCaster) once a panorama scan was asked for
         self._extra_cameras = None  # sim.extra_cameras.ExtraCameras once add_cameras was called
+        self._lidar_without_gl = False  # a panorama scan found no OpenGL: "auto" casts rays
         try:
             self.reset()
         except BaseException:  # a world that fails to build closes what it started (the render process)
@@ -399,11 +401,7 @@ class World:
             images = self._finish_images(*self._render_buffers(T_true))
         else:  # render=False: the camera's clock and pose only
             images = (self._no_returns, None, None)
-        extra = ()
-        if self._extra_cameras is not None:
-            ec = self._extra_cameras
-            T_rel = [np.linalg.inv(self.T_body_camera) @ T for T in ec.T_body_cameras]
-            extra = tuple(zip(ec.render(T_body), T_rel))
+        extra = () if self._extra_cameras is None else self._extra_cameras.render(T_body)
         capture = Capture(seq, self.time, images, self._odometry(T_true), T_true, T_body, self.state(),
                           self.obstacle_truth(), extra)
         return self._frames.add(capture, None if rp is None else rp.result)
@@ -438,14 +436,18 @@ class World:
         collision shapes, the static world and the drone in the main client, the walkers' collidable copies
         in the query client. "panorama": looked up in depth images of the main client's visual shapes drawn
         around the sensor by the gl renderer (sim.lidar_panorama: faster; GLUnavailable without OpenGL).
+        "auto": the panorama, or the rays from the first scan that found no OpenGL on.
         The scan's pose is the true one with the scenario's odometry noise; its stamp the world's time; its
         seq (and pattern index) counts the scans since ``reset``.
 
         Nothing calls this but its user: a world that never scans runs exactly as before, and one that does
         draws the same numbers everywhere else (the LiDAR's noise, dropouts and odometry come from their own
         streams, LIDAR_SEED_TAG) and steps identically."""
-        if method not in ("rays", "panorama"):
-            raise ValueError(f"method: expected 'rays' or 'panorama', got {method!r}")
+        if method not in ("rays", "panorama", "auto"):
+            raise ValueError(f"method: expected 'rays', 'panorama' or 'auto', got {method!r}")
+        auto = method == "auto"
+        if auto:
+            method = "rays" if self._lidar_without_gl else "panorama"
         model = LidarModel() if model is None else model
         T_bs = top_mount() if T_body_sensor is None else np.asarray(T_body_sensor, dtype=np.float64)
         pos, quat = self._drone_pose()
@@ -456,7 +458,13 @@ class World:
                 if self._lidar_panorama is not None:
                     self._lidar_panorama[1].release()
                     self._lidar_panorama = None
-                self._lidar_panorama = (model, PanoramaCaster(p, self._client, model))
+                try:
+                    self._lidar_panorama = (model, PanoramaCaster(p, self._client, model))
+                except GLUnavailable:
+                    if not auto:
+                        raise
+                    self._lidar_without_gl = True
+                    return self.lidar_scan(model, T_bs, "rays")
             caster = self._lidar_panorama[1]
         else:
             # the drone's copy in the query client stands where the drone is, as the contact monitor poses it
