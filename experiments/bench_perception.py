@@ -27,7 +27,7 @@ from dodt.presets import PRESETS, preset
 from experiments.perception_metrics import RECALL_BINS, PerceptionMetrics, bin_labels
 from experiments.figures import new_figure
 from sim import World, load_scenario
-from sim.rig import cameras, lidars, rig
+from sim.rig import cameras, frames_per_scan, lidars, rig
 from sim.trajectories import scenario_reference
 
 SCENARIOS = ("circles", "follow_person", "wall_pass", "partial_obstacle", "static_only", "corridor", "far_people")
@@ -53,10 +53,30 @@ def result_key(config: str, rate: float | None) -> str:
     return config if rate is None else f"{config}@{rate:g}Hz"
 
 
-def corridor_fence(sc) -> tuple[np.ndarray, np.ndarray]:
-    """The scenario's corridor as a geofence ((x, y) low, (x, y) high), as the closed loop's context has it."""
+def rigged_world(sc, seed: int, rig_name: str, segmentation: bool):
+    """(a World carrying the rig's cameras, scan(k): the rig's LiDAR scan taken now when camera frame k is
+    one the loop scans at (every sim.rig.frames_per_scan frames), else None)."""
+    world = World(sc, seed=seed, segmentation=segmentation)
+    mounts = rig(rig_name)
+    if cameras(mounts)[1:]:
+        world.add_cameras([m.yaw for m in cameras(mounts)[1:]])
+    lidar = next(iter(lidars(mounts)), None)
+    if lidar is None:
+        return world, lambda k: None
+    model, T_body = lidar.lidar_model(), lidar.T_body_lidar()
+    every = frames_per_scan(sc.rates.camera, model)
+    return world, lambda k: None if k % every else world.lidar_scan(model, T_body, method="auto")
+
+
+def rigged_dodt(config: str, sc, rig_name: str) -> DODT:
+    """DODT of a configuration, told the scene as the closed loop's context tells it: the corridor as the
+    geofence, and the rig's LiDAR's lowest ray."""
     co = sc.corridor
-    return np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2])
+    model = next((m.lidar_model() for m in lidars(rig(rig_name))), None)
+    pipe = DODT(preset(config))
+    pipe.set_scene(geofence=(np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2])),
+                   lidar_elevation_min=None if model is None else model.elevation_min)
+    return pipe
 
 
 def run_scenario(name: str, seed: int, configs: list[str], duration: float | None = None,
@@ -70,20 +90,10 @@ def run_scenario(name: str, seed: int, configs: list[str], duration: float | Non
     configuration also reads the rig's other cameras and its LiDAR (scanned at its rate, as in the closed
     loop), and recall counts the people within range in any direction, in view or not."""
     sc = load_scenario(name)
-    world = World(sc, seed=seed, segmentation=True)
-    mounts = rig(rig_name)
-    others = cameras(mounts)[1:]
-    if others:
-        world.add_cameras([m.yaw for m in others])
-    lidar = next(iter(lidars(mounts)), None)
-    model = None if lidar is None else lidar.lidar_model()
-    lidar_every = 1 if model is None else max(1, int(round(sc.rates.camera / model.scan_rate)))
-    fence = corridor_fence(sc)
+    world, scan = rigged_world(sc, seed, rig_name, segmentation=True)
     ref = scenario_reference(sc)
     runs = [(c, r) for c in configs for r in (rates or [None])]
-    pipes = {result_key(c, r): DODT(preset(c)) for c, r in runs}
-    for p in pipes.values():
-        p.set_scene(geofence=fence, lidar_elevation_min=None if model is None else model.elevation_min)
+    pipes = {result_key(c, r): rigged_dodt(c, sc, rig_name) for c, r in runs}
     metrics = {k: PerceptionMetrics(all_round=rig_name != "front") for k in pipes}
     tracks = {k: [] for k in pipes}
     slots: dict = {}  # per decimated run: (the first frame's stamp, the index of the next 1 / rate slot)
@@ -95,9 +105,7 @@ def run_scenario(name: str, seed: int, configs: list[str], duration: float | Non
         if frame is not None:
             truth = world.ground_truth()
             extra = world.latest_extra_frames()
-            scan = None
-            if model is not None and n_frames % lidar_every == 0:
-                scan = world.lidar_scan(model, lidar.T_body_lidar(), method="panorama")
+            taken = scan(n_frames)
             n_frames += 1
             for c, rate in runs:
                 key = result_key(c, rate)
@@ -108,8 +116,8 @@ def run_scenario(name: str, seed: int, configs: list[str], duration: float | Non
                     slots[key] = (t0, int(math.floor((frame.stamp - t0) * rate + 1e-6)) + 1)
                 if extra:
                     pipes[key].observe_cameras(extra)
-                if scan is not None:
-                    pipes[key].observe_lidar(scan)
+                if taken is not None:
+                    pipes[key].observe_lidar(taken)
                 r = pipes[key].process(frame)
                 metrics[key].add(r, truth, frame.intrinsics)
                 if record_tracks:
@@ -317,13 +325,7 @@ def record_frames(scenario: str = "corridor", seconds: float = 6.0, seed: int = 
     """The first camera's frames of a flight along the scenario's reference; with another rig than ``front``,
     each as (frame, the other cameras' frames, the LiDAR's scan taken with it or None)."""
     sc = load_scenario(scenario)
-    world = World(sc, seed=seed, segmentation=False)
-    mounts = rig(rig_name)
-    if cameras(mounts)[1:]:
-        world.add_cameras([m.yaw for m in cameras(mounts)[1:]])
-    lidar = next(iter(lidars(mounts)), None)
-    model = None if lidar is None else lidar.lidar_model()
-    every = 1 if model is None else max(1, int(round(sc.rates.camera / model.scan_rate)))
+    world, scan = rigged_world(sc, seed, rig_name, segmentation=False)
     ref = scenario_reference(sc)
     frames = []
     f = world.latest_frame()
@@ -331,9 +333,7 @@ def record_frames(scenario: str = "corridor", seconds: float = 6.0, seed: int = 
         if rig_name == "front":
             frames.append(f)
         else:
-            scan = None if model is None or len(frames) % every else \
-                world.lidar_scan(model, lidar.T_body_lidar(), method="panorama")
-            frames.append((f, world.latest_extra_frames(), scan))
+            frames.append((f, world.latest_extra_frames(), scan(len(frames))))
         if world.time >= seconds:
             break
         f = None
@@ -355,10 +355,8 @@ def run_runtime(config: str = "dodt", scenario: str = "corridor", seconds: float
     frames = [r[0] for r in recorded] if rigged else recorded
     per = {m: [] for m in MODULES + ("total",)}
     sc = load_scenario(scenario)
-    model = next((m.lidar_model() for m in lidars(rig(rig_name))), None)
     for rep in range(repeats + 1):
-        pipe = DODT(preset(config))
-        pipe.set_scene(geofence=corridor_fence(sc), lidar_elevation_min=None if model is None else model.elevation_min)
+        pipe = rigged_dodt(config, sc, rig_name)
         for item in recorded:
             f = item
             if rigged:

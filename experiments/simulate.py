@@ -28,8 +28,7 @@ import numpy as np
 from experiments.pcd import write_scan
 from experiments.sequences import TumWriter, matrix_to_quaternion
 from sim import World, load_scenario
-from sim.gl_renderer import GLUnavailable
-from sim.rig import lidars, rig
+from sim.rig import frames_per_scan, lidars, rig
 from sim.trajectories import scenario_reference
 
 
@@ -100,7 +99,7 @@ class LidarWriter:
     def __init__(self, out: Path, camera_rate: float):
         mount = lidars(rig("lidar"))[0]
         self.model, self.T_body = mount.lidar_model(), mount.T_body_lidar()
-        self.every = max(1, int(round(camera_rate / self.model.scan_rate)))
+        self.every = frames_per_scan(camera_rate, self.model)
         self.dir = out / "lidar"
         self.dir.mkdir(exist_ok=True)
         self.lines = ["# stamp tx ty tz qx qy qz qw file (the LiDAR's pose from odometry; points in its frame)"]
@@ -110,10 +109,7 @@ class LidarWriter:
     def add(self, world, seq: int) -> None:
         if seq % self.every:
             return
-        try:
-            scan = world.lidar_scan(self.model, self.T_body, method="panorama")
-        except GLUnavailable:
-            scan = world.lidar_scan(self.model, self.T_body, method="rays")
+        scan = world.lidar_scan(self.model, self.T_body, method="auto")
         name = f"lidar/{self.count:06d}.pcd"
         write_scan(self.out / name, scan)
         T = scan.T_world_sensor
