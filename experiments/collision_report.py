@@ -3,8 +3,8 @@
 For each collision: the drone's horizontal speed, who closed the gap (the drone's and, for a person,
 the person's velocity along the line between them: positive = moving toward the other), and, over the
 ``window`` seconds before it, the fraction of camera frames in which the person was inside the
-horizontal view of a camera of the rig (or anywhere, with a LiDAR) within ``view_range``, tracked by perception (a reported box centre within
-``match`` metres) and reported as a moving obstacle. A person hit from outside the view was never
+horizontal view of a camera of the rig (or anywhere, with a LiDAR) within ``view_range``, tracked by
+perception (a reported box centre within ``match`` metres) and reported as a moving obstacle. A person hit from outside the view was never
 seen coming; one seen and reported moving points at the planner. ``person_min_speed``: the person's
 lowest speed over the window (a walker standing, or slowing to turn, before walking into the drone).
 ``fault``: the collision's class (experiments.fault), where the log records the contact's velocity and

@@ -44,8 +44,7 @@ from planner.map.visibility import SeenSpace
 from planner.map.voxel_map import MapConfig, VoxelMap
 from planner.types import ObstaclePrediction, Planner, PlannerInput
 from sim import World, load_scenario
-from sim.gl_renderer import GLUnavailable
-from sim.rig import SensorMount, cameras, rig_of, yaw_matrix
+from sim.rig import SensorMount, camera_mount, cameras, frames_per_scan, rig_of
 from sim.static_grid import static_occupancy
 
 GOAL_TOLERANCE = 0.4  # m: the episode succeeds when the drone is this close to the goal
@@ -86,9 +85,7 @@ def rig_sensors(sc, world: World, mounts: tuple[SensorMount, ...]) -> tuple:
     out = []
     for m in mounts:
         if m.kind == "camera":
-            T = world.T_body_camera.copy()
-            R = yaw_matrix(m.yaw)
-            T[:3, :3], T[:3, 3] = R @ T[:3, :3], R @ T[:3, 3]
+            T = camera_mount(world.T_body_camera, m.yaw)
             out.append(CameraSensor(name=m.name, intrinsics=world.intrinsics, T_body_sensor=T,
                                     rate=float(sc.rates.camera), max_depth=float(sc.camera.max_range)))
         else:
@@ -98,15 +95,16 @@ def rig_sensors(sc, world: World, mounts: tuple[SensorMount, ...]) -> tuple:
 
 
 def episode_context(sc, seed: int, world: World, cfg: EpisodeConfig, duration: float, vmap: VoxelMap,
-                    seen: SeenSpace) -> EpisodeContext:
-    """The context every module of this episode is reset with."""
+                    seen: SeenSpace, mounts: tuple[SensorMount, ...]) -> EpisodeContext:
+    """The context every module of this episode is reset with; ``mounts``: its rig (sim.rig.rig_of)."""
     v = world.vehicle
     co = sc.corridor  # its walls are known: the planner keeps inside them (the map sees them only at a glance)
     control = 1.0 / (world.dt * world.steps_per_control)
     return EpisodeContext(
         scenario=sc.name, seed=seed, duration=duration,
         vehicle=VehicleLimits.from_thrust(v.radius, v.collision_size, v.mass, v.thrust_to_weight),
-        sensors=rig_sensors(sc, world, rig_of(cfg.rig, sc)[1]), rates=Rates(control=control, plan=cfg.plan_rate, map=sc.rates.camera / cfg.map_every),
+        sensors=rig_sensors(sc, world, mounts),
+        rates=Rates(control=control, plan=cfg.plan_rate, map=sc.rates.camera / cfg.map_every),
         start=np.asarray(sc.drone.start, float), goal=np.asarray(sc.drone.goal, float),
         geofence=(np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2])),
         static_map=vmap, seen=seen)
@@ -163,7 +161,8 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
         world = World(sc, seed=seed, renderer=renderer if renderer is not None else cfg.renderer,
                       segmentation=False, render=render, frame_latency=cfg.frame_latency, color=color,
                       render_process=cfg.render_process and render and cfg.frame_latency > 0)
-        others = cameras(rig_of(cfg.rig, sc)[1])[1:]
+        rig = rig_of(cfg.rig, sc)  # (its name, its sensors)
+        others = cameras(rig[1])[1:]
         if others and render:
             world.add_cameras([m.yaw for m in others])
         if isinstance(spec, str):
@@ -176,7 +175,7 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
                 labels["planner"] = f"shield+{labels['planner']}"
         used = {"episode": cfg, **planner_sections(planner), **perception_sections(perc),
                 **plugin_sections(perception, spec, settings)}
-        loop = _Loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame, labels, timer)
+        loop = _Loop(sc, seed, world, perc, planner, log, cfg, duration, on_frame, labels, timer, rig)
         startup = time.perf_counter() - t_wall
         summary = loop.run(used, settings)
     finally:
@@ -212,9 +211,10 @@ class _Loop:
     and a control step until the goal, a crash or the time limit."""
 
     def __init__(self, sc, seed: int, world: World, perc, planner, log: EpisodeLog, cfg: EpisodeConfig,
-                 duration: float, on_frame, labels: dict, timer: CompileTimer):
+                 duration: float, on_frame, labels: dict, timer: CompileTimer, rig: tuple[str, tuple[SensorMount, ...]]):
         self.sc, self.seed, self.world, self.cfg, self.duration = sc, seed, world, cfg, duration
         self.on_frame, self.labels, self.timer = on_frame, labels, timer
+        self.rig_name, self.mounts = rig  # sim.rig.rig_of: the rig's name and its sensors
         self.raw_planner = planner
         self.perception = PerceptionGuard(perc, labels["perception"])
         self.planner = PlannerGuard(planner, labels["planner"])
@@ -259,7 +259,7 @@ class _Loop:
         summary = summarize_log(self.log.finish())
         summary["map_voxels_occupied"] = int(self.vmap.occupied_count())
         summary["perception_name"] = self.labels["perception_name"]
-        summary["rig"] = rig_of(self.cfg.rig, self.sc)[0]
+        summary["rig"] = self.rig_name
         summary["config"] = config
         return summary
 
@@ -274,7 +274,7 @@ class _Loop:
         self.seen = seen = SeenSpace(vmap.xy_origin, tuple(vmap.dims[:2]), vmap.res, band=cfg.seen_band)
         seen.reset(start_xy=np.asarray(sc.drone.start[:2], float), radius=cfg.launch_radius, stamp=0.0)
         self.seen_blocked = vmap.column_blocked(*cfg.seen_band, inflate=False) if self.known_map else None
-        ctx = episode_context(sc, self.seed, world, cfg, self.duration, vmap, seen)
+        ctx = episode_context(sc, self.seed, world, cfg, self.duration, vmap, seen, self.mounts)
         self.perception.reset(ctx)
         self.planner.reset(ctx)
         self.truth_for_perception = bool(getattr(self.perception.perception, "uses_ground_truth", False))
@@ -286,34 +286,27 @@ class _Loop:
         """The rig's other cameras (their frames come with the first's) and its LiDAR: scanned every
         ``lidar_every``-th camera frame when perception reads scans or the map is built from the sensors."""
         world, perc = self.world, self.perception.perception
-        self.other_cameras = len(cameras(rig_of(self.cfg.rig, self.sc)[1])) > 1 and world.render_on
+        self.other_cameras = len(cameras(self.mounts)) > 1 and world.render_on
         self.lidar = next((s for s in ctx.sensors if isinstance(s, LidarSensor)), None)
         wants_scans = callable(getattr(perc, "observe_lidar", None)) or not self.known_map
         if self.lidar is not None and not (wants_scans and world.render_on):
             self.lidar = None  # nothing would read its scans
-        self.lidar_every = 1 if self.lidar is None else \
-            max(1, int(round(self.sc.rates.camera / self.lidar.rate)))
-        self.lidar_method = "panorama"
+        self.lidar_every = 1 if self.lidar is None else frames_per_scan(self.sc.rates.camera, self.lidar.model)
         self.map_scan = None  # the latest scan not yet in the map
-        self.scan_world = None  # the latest scan's returns in the world frame (viewers)
+        self.scan_world = None  # the latest scan's returns in the world frame (for on_frame only)
 
     def _scan(self):
         """A LiDAR scan now: the depth panorama (sim.lidar_panorama), or cast rays without OpenGL."""
-        li = self.lidar
-        if self.lidar_method == "panorama":
-            try:
-                return self.world.lidar_scan(li.model, li.T_body_sensor, method="panorama")
-            except GLUnavailable:
-                self.lidar_method = "rays"
-        return self.world.lidar_scan(li.model, li.T_body_sensor, method="rays")
+        return self.world.lidar_scan(self.lidar.model, self.lidar.T_body_sensor, method="auto")
 
     def _header(self, ctx: EpisodeContext, config: dict) -> None:
         sc, world, cfg, vmap = self.sc, self.world, self.cfg, self.vmap
         self.rec.header(
             scenario=sc.name, source=sc.source, seed=self.seed, perception=self.labels["perception"],
             planner=self.labels["planner"], duration=self.duration, static_map=cfg.static_map,
-            rig=rig_of(cfg.rig, sc)[0],
-            sensors=[{"name": s.name, "kind": s.kind, "yaw": round(math.degrees(sensor_yaw(s)), 3)} for s in ctx.sensors],
+            rig=self.rig_name,
+            sensors=[{"name": s.name, "kind": s.kind, "yaw": round(math.degrees(sensor_yaw(s)), 3)}
+                     for s in ctx.sensors],
             frame_latency=cfg.frame_latency,
             rates={"control": ctx.rates.control, "camera": sc.rates.camera, "plan": cfg.plan_rate, "map": ctx.rates.map},
             corridor={"length": sc.corridor.length, "width": sc.corridor.width, "height": sc.corridor.height},
@@ -337,8 +330,9 @@ class _Loop:
         if scan is not None:
             self.perception.observe("observe_lidar", scan, frame.stamp)
             self.map_scan = scan  # for the map's next update
-            self.scan_world = scan.points_world()
-            self.rec.lidar(scan.stamp, self.scan_world)
+            self.rec.lidar(scan)
+            if self.on_frame is not None:
+                self.scan_world = scan.points_world()
         po = self.perception.update(frame, truth if self.truth_for_perception else None)
         perc_ms = (time.perf_counter() - t0 - (self.timer.seconds - c0)) * 1e3
         if po.skipped is None:

@@ -144,7 +144,8 @@ def summarize(records: Iterable[dict]) -> dict:
         failure = end["reason"]
     return {
         "scenario": header["scenario"], "seed": header["seed"], "perception": header["perception"],
-        "planner": header.get("planner"), "rig": header.get("rig", "front"), "static_map": header.get("static_map", "depth"),
+        "planner": header.get("planner"), "rig": header.get("rig", "front"),
+        "static_map": header.get("static_map", "depth"),
         "frame_latency": header.get("frame_latency", 0),
         "people_see_drone": any(p.get("sees_drone", False) for p in header.get("people", [])),
         "success": reached and not collided,

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from dodt.frames import LidarScan
 from dodt.protocol import PerceptionOutput
 from experiments.episode_log import EpisodeLog, MapChanges, r4
 from planner.types import Trajectory
@@ -50,14 +51,15 @@ class EpisodeRecorder:
         self.log.add(self._changes.record(round(t, 4), idx[above_floor]))
         self._next_snapshot = math.inf if self.map_changes_stop else t + self.snapshot_period
 
-    def lidar(self, t: float, points_world: np.ndarray) -> None:
-        """A ``lidar`` record (a scan's world points, decimated to LIDAR_POINTS, cm) at most once per
+    def lidar(self, scan: LidarScan) -> None:
+        """A ``lidar`` record (the scan's world points, decimated to LIDAR_POINTS, cm) at most once per
         snapshot period: what the HTML replay shows of the LiDAR."""
-        if t < self._next_lidar:
+        if scan.stamp < self._next_lidar:
             return
-        step = max(1, -(-len(points_world) // LIDAR_POINTS))
-        self.log.add({"k": "lidar", "t": round(t, 4), "pts": np.round(points_world[::step], 2).tolist()})
-        self._next_lidar = t + self.snapshot_period
+        step = max(1, -(-len(scan) // LIDAR_POINTS))
+        points = scan.points_world()[::step]
+        self.log.add({"k": "lidar", "t": round(scan.stamp, 4), "pts": np.round(points, 2).tolist()})
+        self._next_lidar = scan.stamp + self.snapshot_period
 
     def plan(self, t: float, traj: Trajectory, n_obstacles: int, telemetry: dict) -> None:
         path = telemetry.get("path")
