@@ -252,6 +252,10 @@ LIMITS: dict[str, Limit] = {
     "navigator.fov_margin": _real(0.0, math.pi),  # rad
     "navigator.watch_range": _RANGE,
     "navigator.watch_times": _real(0.0, 10.0, length=(1, 16)),  # s ahead
+    # ---- navigator.nmpc (planner.mpc.config.NMPCConfig)
+    "navigator.nmpc.stride": _whole(1, 100),  # MPC steps per NMPC step (at most the horizon: checked on build)
+    "navigator.nmpc.max_iter": _whole(1, 10000),
+    "navigator.nmpc.tol": _real(0.0, 1.0, lo_open=True),
     # ---- navigator.maneuvers (planner.nominal.maneuvers.ManeuverConfig). Candidates: (len(along) x len(across))^2,
     # each of mpc.horizon steps: 12 x 12 targets give 20736
     "navigator.maneuvers.along": _real(-10.0, 10.0, length=(1, 12)),  # m/s

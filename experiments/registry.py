@@ -9,8 +9,9 @@ planners, built-in or plug-in.
   Values are checked against experiments.config_limits for the built-in sections and against a plug-in
   field's ``metadata["range"]``.
 - **Perception**: a mode name (``MODES``), a DODT preset (dodt.presets), or a plug-in's ``module:Class``.
-- **Planners**: ``default`` (the maneuver and MPC planner behind the passive-safety shield) or a plug-in's
-  ``module:Class``, which ``shield=True`` puts behind the same shield.
+- **Planners**: ``default`` (the maneuver and MPC planner behind the passive-safety shield, the MPC an OSQP
+  QP), ``nmpc`` (the same with the CasADi NMPC, planner.mpc.nmpc) or a plug-in's ``module:Class``, which
+  ``shield=True`` puts behind the same shield.
 """
 from __future__ import annotations
 
@@ -31,6 +32,9 @@ from planner.shield.shield import PassiveSafetyShield, ShieldConfig
 
 DEFAULT_PLANNER = "default"
 DEFAULT_PLANNER_LABEL = "PassiveSafetyShield"  # what summaries record for the default planner
+# the built-in planners: the maneuver layer and an MPC behind the shield; by name, the MPC's solver and what
+# summaries record
+BUILTIN_PLANNERS = {DEFAULT_PLANNER: ("osqp", DEFAULT_PLANNER_LABEL), "nmpc": ("nmpc", "PassiveSafetyShield+NMPC")}
 PLANNER_METHODS = ("reset", "plan")
 PERCEPTION_METHODS = ("reset", "update")
 PLUGIN_SECTIONS = ("planner", "perception")
@@ -154,27 +158,29 @@ def perception_sections(perception) -> dict:
 
 def check_planner(spec: str) -> None:
     """Raises PluginError when ``spec`` names no planner (a plug-in is loaded and built once)."""
-    if spec != DEFAULT_PLANNER:
+    if spec not in BUILTIN_PLANNERS:
         if not is_spec(spec):
-            raise PluginError(f"unknown planner {spec!r}; built-in: {DEFAULT_PLANNER}; or module:Class")
+            raise PluginError(f"unknown planner {spec!r}; built-in: {', '.join(BUILTIN_PLANNERS)}; or module:Class")
         load_plugin(spec, PLANNER_METHODS, "planner", "planner.types.Planner")
 
 
 def planner_label(spec: str | None, shield: bool = False) -> str:
     """What a summary records as ``planner`` for a spec (None: the default planner); ``shield+spec`` for a
     plug-in flown behind the shield."""
-    if spec is None or spec == DEFAULT_PLANNER:
+    if spec is None:
         return DEFAULT_PLANNER_LABEL
+    if spec in BUILTIN_PLANNERS:
+        return BUILTIN_PLANNERS[spec][1]
     return f"shield+{spec}" if shield else spec
 
 
 def make_planner(spec: str, robot_radius: float, settings: Settings = Settings(), shield: bool = False):
-    """The planner for an episode of a vehicle of horizontal radius ``robot_radius``: the default one (the
-    maneuver and MPC planner behind the shield, ``navigator`` and ``shield`` sections applied) or a plug-in
-    (its ``planner`` section applied), behind the shield too when ``shield``."""
-    if spec == DEFAULT_PLANNER:
+    """The planner for an episode of a vehicle of horizontal radius ``robot_radius``: a built-in one (the
+    maneuver and MPC planner behind the shield, ``navigator`` and ``shield`` sections applied; BUILTIN_PLANNERS)
+    or a plug-in (its ``planner`` section applied), behind the shield too when ``shield``."""
+    if spec in BUILTIN_PLANNERS:
         nav = configured(settings, "navigator", NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius)))
-        return behind_shield(MPCPlanner(nav), robot_radius, settings)
+        return behind_shield(MPCPlanner(nav, solver=BUILTIN_PLANNERS[spec][0]), robot_radius, settings)
     plugin = load_plugin(spec, PLANNER_METHODS, "planner", "planner.types.Planner",
                          _plugin_config(spec, "planner", settings))
     return behind_shield(plugin, robot_radius, settings) if shield else plugin

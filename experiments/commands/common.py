@@ -219,8 +219,9 @@ def add_rig_option(parser: argparse.ArgumentParser) -> None:
 def add_config_options(parser: argparse.ArgumentParser) -> None:
     """--planner, --config and --set (experiments.plugins, experiments.config)."""
     parser.add_argument("--planner", default="default", metavar="NAME|module:Class",
-                        help="default (the MPC planner behind the passive-safety shield) or your own planner class: "
-                             "module:Class with module a dotted module or a .py file; built with no arguments")
+                        help="default (the MPC planner behind the passive-safety shield), nmpc (the same with the "
+                             "MPC in CasADi) or your own planner class: module:Class with module a dotted module or "
+                             "a .py file; built with no arguments")
     parser.add_argument("--shield", action="store_true",
                         help="fly a plug-in --planner behind the passive-safety shield (the default planner is)")
     parser.add_argument("--config", default=None, metavar="FILE.toml",
@@ -277,13 +278,15 @@ def builtin_names() -> str:
     """Epilog blocks naming the built-in perception modes, the DODT presets and the built-in planner."""
     from dodt.presets import PRESETS
     from experiments.perception_modes import MODES
-    from experiments.registry import DEFAULT_PLANNER, DEFAULT_PLANNER_LABEL
+    from experiments.registry import BUILTIN_PLANNERS, DEFAULT_PLANNER
 
     return "\n\n".join([
         name_list("perception modes (--perception)", MODES),
         name_list("DODT presets (--perception; see dodt/presets.py)", PRESETS),
-        name_list("built-in planner (--planner)", [f"{DEFAULT_PLANNER} (the maneuver and MPC planner behind the "
-                                                   f"passive-safety shield, recorded as {DEFAULT_PLANNER_LABEL})"]),
+        name_list("built-in planners (--planner)", [
+            f"{DEFAULT_PLANNER} (the maneuver and MPC planner behind the passive-safety shield, the MPC an OSQP QP; "
+            f"recorded as {BUILTIN_PLANNERS[DEFAULT_PLANNER][1]})",
+            f"nmpc (the same with the MPC a CasADi NMPC solved by IPOPT; recorded as {BUILTIN_PLANNERS['nmpc'][1]})"]),
         "Your own classes plug in as --perception module:Class and --planner module:Class (examples/"
         "custom_perception.py, examples/custom_planner.py).",
     ])

@@ -49,3 +49,13 @@ class MPCConfig:
     max_iter: int = 4000
     max_prim_res: float = 1e-2  # accept a max-iterations result whose primal residual is below this
     backoff: float = 0.01  # m/s, m; v and z bounds tightened inside the QP: OSQP's residuals stay within bounds
+
+
+@dataclass(frozen=True)
+class NMPCConfig:
+    """Settings of the CasADi NMPC (planner.mpc.nmpc) beyond MPCConfig's, whose problem it solves."""
+
+    stride: int = 2  # the NMPC's step is this many MPCConfig.dt (its horizon as long, in fewer steps): IPOPT's
+    # time grows with the problem's size; ours
+    max_iter: int = 60  # IPOPT iterations; a plan not converged by then is refused (the shield's stop); ours
+    tol: float = 1e-4  # IPOPT's tolerance; ours

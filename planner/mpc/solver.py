@@ -64,6 +64,28 @@ class MPCResult:
     ignored_obstacles: int = 0  # obstacles skipped for non-finite data
 
 
+def altitude_band(cfg: MPCConfig, p0, v0) -> tuple[np.ndarray, np.ndarray]:
+    """(3)'s altitude bounds (N,) each on p_1..p_N: the band less the backoff, widened to the vertical
+    braking path from a start outside it or heading out of it."""
+    N, dt = cfg.horizon, cfg.dt
+    vz = np.sign(v0[2]) * np.maximum(abs(v0[2]) - cfg.a_max_z * dt * np.arange(N + 1), 0.0)
+    zb = p0[2] + np.cumsum(0.5 * dt * (vz[:-1] + vz[1:]))
+    return np.minimum(cfg.z_min + cfg.backoff, zb), np.maximum(cfg.z_max - cfg.backoff, zb)
+
+
+def brake_result(t0, p0, v0, amax, dt, horizon, why, tic, iters=0, ignored=0) -> MPCResult:
+    """A solver's fallback: brake-and-hold at the largest deceleration along -v within the per-axis limits
+    ``amax`` (3,), status ``fallback:<why>``; solve_ms from ``tic`` (perf_counter)."""
+    v = np.where(np.isfinite(v0), v0, 0.0)
+    sp_ = np.linalg.norm(v)
+    d = np.abs(v) / sp_ if sp_ > 1e-9 else np.ones(3)
+    a = float(np.min(amax / np.maximum(d, 1e-12)))
+    ms = (time.perf_counter() - tic) * 1e3
+    tr = brake_and_hold(t0, p0, v, a_max=a, dt=dt, horizon=horizon, status=f"fallback:{why}")
+    tr = Trajectory(tr.t0, tr.dt, tr.positions, tr.velocities, tr.accelerations, status=tr.status, solve_ms=ms)
+    return MPCResult(tr, tr.status, iters, 0.0, 0.0, ms, ignored)
+
+
 class MPC:
     """One OSQP problem set up once; ``solve`` re-linearises the obstacles and re-solves (module docstring)."""
 
@@ -80,14 +102,7 @@ class MPC:
 
     def _fallback(self, t0, p0, v0, why, tic, iters=0, ignored=0):
         self._prev = None
-        v = np.where(np.isfinite(v0), v0, 0.0)
-        sp_ = np.linalg.norm(v)
-        d = np.abs(v) / sp_ if sp_ > 1e-9 else np.ones(3)
-        a = float(np.min(self.qp.amax / np.maximum(d, 1e-12)))  # the largest deceleration along -v within limits
-        ms = (time.perf_counter() - tic) * 1e3
-        tr = brake_and_hold(t0, p0, v, a_max=a, dt=self.cfg.dt, horizon=self.N, status=f"fallback:{why}")
-        tr = Trajectory(tr.t0, tr.dt, tr.positions, tr.velocities, tr.accelerations, status=tr.status, solve_ms=ms)
-        return MPCResult(tr, tr.status, iters, 0.0, 0.0, ms, ignored)
+        return brake_result(t0, p0, v0, self.qp.amax, self.cfg.dt, self.N, why, tic, iters, ignored)
 
     def _rejected(self, res) -> str:
         """Why an OSQP result cannot be used ('' when it can): solved (or out of iterations with a primal
@@ -132,11 +147,8 @@ class MPC:
         l, u = qp.l0.copy(), qp.u0.copy()
         l[:3] = u[:3] = p0 + dt * v0
         l[3:6] = u[3:6] = v0
-        # altitude band, widened to the vertical braking path from a start outside it or heading out of it
-        vz = np.sign(v0[2]) * np.maximum(abs(v0[2]) - cfg.a_max_z * dt * np.arange(N + 1), 0.0)
-        zb = p0[2] + np.cumsum(0.5 * dt * (vz[:-1] + vz[1:]))
         rz = slice(6 * N + 3, 15 * N, 9)
-        l[rz], u[rz] = np.minimum(cfg.z_min + cfg.backoff, zb), np.maximum(cfg.z_max - cfg.backoff, zb)
+        l[rz], u[rz] = altitude_band(cfg, p0, v0)
         fence = None
         if geofence is not None:
             lo, hi = (np.asarray(x, dtype=float).reshape(-1)[:2] for x in geofence)

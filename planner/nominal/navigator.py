@@ -25,7 +25,7 @@ from dodt.frames import CameraIntrinsics
 from dodt.geometry import half_view
 from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
 from planner.map.clearance import static_clearance
-from planner.mpc.config import MPCConfig
+from planner.mpc.config import MPCConfig, NMPCConfig
 from planner.mpc.solver import MPC
 from planner.nominal.global_path import CostToGo, PathFollower, block_discs, grid_path
 from planner.nominal.maneuvers import ManeuverConfig, ManeuverSelector
@@ -65,17 +65,29 @@ class NavigatorConfig:
     # behind stops pulling the camera round, away from what lies ahead
     watch_times: tuple[float, ...] = (0.5, 1.0)
     mpc: MPCConfig = field(default_factory=MPCConfig)
+    nmpc: NMPCConfig = field(default_factory=NMPCConfig)  # the CasADi NMPC's solver (the nmpc planner only)
 
 
+def _nmpc(cfg: NavigatorConfig):
+    from planner.mpc.nmpc import NMPC  # CasADi is loaded only by the runs that use it
+
+    return NMPC(cfg.mpc, cfg.nmpc)
+
+
+SOLVERS = {"osqp": lambda cfg: MPC(cfg.mpc), "nmpc": _nmpc}  # the MPC's solver by name
 _HEADINGS = np.radians(np.arange(-180, 180, 5.0))  # the heading's choices
 
 
 class MPCPlanner:
     """Implements planner.types.Planner."""
 
-    def __init__(self, cfg: NavigatorConfig = NavigatorConfig()):
+    def __init__(self, cfg: NavigatorConfig = NavigatorConfig(), solver: str = "osqp"):
+        """solver: the MPC's, ``osqp`` (planner.mpc.solver, the QP) or ``nmpc`` (planner.mpc.nmpc, CasADi)."""
         self.cfg = cfg
-        self.mpc = MPC(cfg.mpc)
+        if solver not in SOLVERS:
+            raise ValueError(f"MPCPlanner: unknown solver {solver!r}; known: {', '.join(SOLVERS)}")
+        self.solver = solver
+        self.mpc = SOLVERS[solver](cfg)
         m = cfg.mpc
         self.selector = ManeuverSelector(cfg.maneuvers, horizon=m.horizon, dt=m.dt, a_max=m.a_max_xy,
                                          v_max=m.v_max_xy, robot_radius=m.robot_radius)

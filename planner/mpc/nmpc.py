@@ -1,0 +1,237 @@
+"""Non-linear MPC in CasADi: the OSQP MPC's problem (planner.mpc.solver) with exact clearance to people
+and a terminal stop, solved by IPOPT.
+
+Decision vector w = [u_0..u_{N-1}, sd_1..sd_N, ss_1..ss_N] (5 N): the accelerations and one dynamic and
+one static slack per step (metres, >= 0). The states are the double integrator's rollout of u from
+(p_0, v_0), symbolic in the parameters, so the dynamics hold exactly and are not constraints.
+    Cost: the OSQP MPC's (2), the same weights (MPCConfig).
+    Bounds: |u_k| <= a_max; |v_k| <= v_max - backoff (k = 1..N-1); v_N = 0: the plan ends at rest
+        (passive safety: what the drone commits to always contains a stop); z_min <= p_k,z <= z_max
+        widened to the vertical braking path as the OSQP MPC does.
+    Moving obstacle j, step k (exact, not linearised): with f = sum_i ((p_k,i - o_i) / a_i)^2 the
+        OSQP MPC's ellipsoid (4) (semi-axes growing with the prediction's standard deviation; an
+        ellipsoid spanning the altitude band becomes its elliptic cylinder),
+            min_i(a_i) (sqrt(f) - 1) + sd_k >= 0,
+        about the metres by which p_k keeps out of it; non-convex, so the solution is a local one near
+        the initial guess, and the initial guess is the maneuver layer's chosen motion (the guide): it
+        picks the passing side, as the guide's linearisation does for the QP.
+    Static structure and the geofence: the OSQP MPC's half-spaces (5) and (6) (linear), on ss_k.
+The problem is built once (SX expressions, one ``nlpsol``); every call only passes parameters and
+bounds. Warm start: the guide's accelerations, else the previous solution shifted in time.
+
+The solver is a drop-in for planner.mpc.solver.MPC (same ``solve`` and result); the navigator picks it
+with ``NavigatorConfig.solver = "nmpc"`` (``--planner nmpc``).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import casadi as ca
+import numpy as np
+
+from planner.mpc.config import MPCConfig, NMPCConfig
+from planner.mpc.qp import rollout
+from planner.mpc.rows import dynamic_candidates, finite_rows, static_rows
+from planner.mpc.solver import MPCResult, altitude_band, brake_result
+from planner.types import Trajectory, finite_obstacle
+
+__all__ = ["NMPC", "NMPCConfig"]
+
+_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+def _buckets(cfg: MPCConfig) -> tuple[int, ...]:
+    """The numbers of moving obstacles a problem is built for: powers of two below max_dynamic, and it."""
+    out, j = [0], 1
+    while j < cfg.max_dynamic:
+        out.append(j)
+        j *= 2
+    return tuple(out) + (cfg.max_dynamic,)
+
+
+def _build(cfg: MPCConfig, ncfg: NMPCConfig, J: int):
+    """The NLP (module docstring) with rows for J moving obstacles, as one ``nlpsol``; returns (solver,
+    parameter offsets, row offsets). Variables w = [u (3 N), sd (N), ss (N), x (6 N)]: the states x_k =
+    (p_k, v_k), k = 1..N, are variables tied by the dynamics' equality rows (sparse derivatives, which IPOPT's
+    linear solver factorises fast), so the speed and altitude limits are bounds on w, not rows."""
+    N, Ks, dt = cfg.horizon, cfg.static_per_step, cfg.dt
+    u, sd, ss, x = ca.SX.sym("u", 3, N), ca.SX.sym("sd", N), ca.SX.sym("ss", N), ca.SX.sym("x", 6, N)
+    p0, v0, a0 = ca.SX.sym("p0", 3), ca.SX.sym("v0", 3), ca.SX.sym("a0", 3)
+    pref, vref = ca.SX.sym("pref", 3, N), ca.SX.sym("vref", 3, N)
+    obs_o = ca.SX.sym("o", 3, N * J)  # predicted centres, column k * J + j
+    obs_ia = ca.SX.sym("ia", 3, N * J)  # inverse semi-axes (0 in z: a cylinder)
+    obs_am = ca.SX.sym("am", N * J)  # smallest semi-axis
+    st_n = ca.SX.sym("sn", 3, N * Ks)  # static planes' normals, column k * Ks + i
+    params = ca.vertcat(p0, v0, a0, ca.vec(pref), ca.vec(vref), ca.vec(obs_o), ca.vec(obs_ia), obs_am, ca.vec(st_n))
+    cost = 0
+    p, v, prev_u = p0, v0, a0
+    g_eq, g_dyn, g_sta = [], [], []
+    for k in range(N):
+        uk = u[:, k]
+        g_eq += [x[:3, k] - (p + dt * v + 0.5 * dt * dt * uk), x[3:, k] - (v + dt * uk)]
+        p, v = x[:3, k], x[3:, k]
+        w_p = cfg.w_terminal if k == N - 1 else cfg.w_pos
+        cost += w_p * ca.sumsqr(p - pref[:, k]) + cfg.w_vel * ca.sumsqr(v - vref[:, k])
+        cost += cfg.w_acc * ca.sumsqr(uk) + cfg.w_jerk * ca.sumsqr(uk - prev_u)
+        cost += cfg.w_slack_lin * (sd[k] + cfg.static_slack_scale * ss[k])
+        cost += cfg.w_slack_quad * (sd[k] ** 2 + cfg.static_slack_scale * ss[k] ** 2)
+        prev_u = uk
+        for j in range(J):
+            c = k * J + j
+            q = (p - obs_o[:, c]) * obs_ia[:, c]
+            g_dyn.append(obs_am[c] * (ca.sqrt(ca.sumsqr(q) + 1e-9) - 1.0) + sd[k])
+        g_sta += [ca.dot(st_n[:, k * Ks + i], p) + ss[k] for i in range(Ks)]
+    g = ca.vertcat(*g_eq, *g_dyn, *g_sta)
+    w = ca.vertcat(ca.vec(u), sd, ss, ca.vec(x))
+    rows = {"dyn": 6 * N, "sta": 6 * N + J * N, "m": 6 * N + J * N + Ks * N}
+    lay = {"pref": 9, "vref": 9 + 3 * N, "o": 9 + 6 * N, "ia": 9 + 6 * N + 3 * N * J, "am": 9 + 6 * N + 6 * N * J,
+           "sn": 9 + 6 * N + 7 * N * J, "np": int(params.numel())}
+    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": ncfg.max_iter,
+            "ipopt.tol": ncfg.tol, "ipopt.nlp_scaling_method": "gradient-based", "error_on_fail": False}
+    return ca.nlpsol(f"nmpc{J}", "ipopt", {"x": w, "p": params, "f": cost, "g": g}, opts), lay, rows
+
+
+class NMPC:
+    """CasADi NLPs built once (one per bucket of moving-obstacle counts, on first use); ``solve`` fills the
+    parameters and bounds and runs IPOPT (module docstring). Same interface as planner.mpc.solver.MPC."""
+
+    def __init__(self, cfg: MPCConfig = MPCConfig(), ncfg: NMPCConfig = NMPCConfig()):
+        """cfg: the problem (horizon and dt: the references' grid); ncfg: the solver, whose step is
+        ``ncfg.stride`` of cfg's (the returned trajectory's dt)."""
+        if not (isinstance(ncfg.stride, int) and 1 <= ncfg.stride <= cfg.horizon):
+            raise ValueError(f"NMPCConfig.stride must be a whole number in [1, horizon = {cfg.horizon}], "
+                             f"not {ncfg.stride!r}")
+        self.fine, self.ncfg = cfg, ncfg
+        self.cfg = cfg = replace(cfg, horizon=cfg.horizon // ncfg.stride, dt=cfg.dt * ncfg.stride)
+        self.N = cfg.horizon
+        self._take = ncfg.stride * np.arange(1, self.N + 1) - 1  # the references' knots on the NMPC's grid
+        self.buckets = _buckets(cfg)
+        self._problems: dict[int, tuple] = {}
+        self.amax = np.array([cfg.a_max_xy, cfg.a_max_xy, cfg.a_max_z])
+        self.vmax = np.array([cfg.v_max_xy, cfg.v_max_xy, cfg.v_max_z])
+        self.reset()
+
+    def problem(self, n: int):
+        """(solver, parameter offsets, row offsets) of the smallest problem with rows for n moving obstacles."""
+        J = next(b for b in self.buckets if b >= min(n, self.cfg.max_dynamic))
+        if J not in self._problems:
+            self._problems[J] = (J, *_build(self.cfg, self.ncfg, J))
+        return self._problems[J]
+
+    def reset(self) -> None:
+        """Forget the previous solution: the next call starts from the guide or a straight line."""
+        self._prev = None  # (t0, accelerations (N, 3))
+
+    def _fallback(self, t0, p0, v0, why, tic, iters=0, ignored=0):
+        self._prev = None
+        return brake_result(t0, p0, v0, self.amax, self.cfg.dt, self.N, why, tic, iters, ignored)
+
+    def _fence(self, geofence, p0, v0) -> tuple[np.ndarray, np.ndarray]:
+        """The planned positions' x, y bounds (2,) each from the geofence (the known walls): geofence_margin
+        inside it, widened to what the drone cannot avoid from (p0, v0) (its braking path at a_max_xy per
+        axis): inside the margin, no closer. Unbounded without a finite geofence."""
+        lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
+        if geofence is None:
+            return lo, hi
+        g_lo, g_hi = (np.asarray(x, dtype=float).reshape(-1)[:2] for x in geofence)
+        if not (np.all(np.isfinite(g_lo)) and np.all(np.isfinite(g_hi))):
+            return lo, hi
+        v = v0[:2]
+        reach = p0[:2] + v * np.abs(v) / (2 * self.cfg.a_max_xy) + np.sign(v) * self.cfg.backoff
+        r = self.cfg.geofence_margin
+        return np.minimum(g_lo + r, np.minimum(p0[:2], reach)), np.maximum(g_hi - r, np.maximum(p0[:2], reach))
+
+    def _initial(self, t0, p0, v0, guide, p_ref) -> np.ndarray:
+        """Initial guess of the accelerations (N, 3): the motion through the guide's knots, else the previous
+        solution shifted by the elapsed steps, else one step toward the reference's end."""
+        N, dt = self.N, self.cfg.dt
+        s = None if self._prev is None else round((t0 - self._prev[0]) / dt)
+        if guide is not None:
+            vel = np.vstack([v0, np.diff(np.vstack([p0, guide]), axis=0) / dt])
+            acc = np.diff(vel, axis=0) / dt
+        elif s is not None and 0 <= s <= N:
+            acc = np.vstack([self._prev[1][s:], np.zeros((s, 3))])
+        else:
+            acc = np.zeros((N, 3))
+            acc[0] = (p_ref[-1] - p0) / (N * dt) - v0
+        return np.clip(acc, -self.amax, self.amax)
+
+    def solve(self, t0, position, velocity, acceleration, p_ref, v_ref, obstacles=(), static_points=None,
+              geofence=None, guide=None) -> MPCResult:
+        """One receding-horizon plan from (position, velocity) at time t0, as planner.mpc.solver.MPC.solve
+        (the same arguments; guide: the initial guess and the static planes' linearisation points)."""
+        tic = time.perf_counter()
+        cfg, N, dt, Nf = self.cfg, self.N, self.cfg.dt, self.fine.horizon
+        p0, v0, a0 = (np.asarray(x, dtype=float).reshape(3) for x in (position, velocity, acceleration))
+        p_ref = np.asarray(p_ref, dtype=float).reshape(Nf, 3)[self._take]
+        v_ref = np.asarray(v_ref, dtype=float).reshape(Nf, 3)[self._take]
+        if not (math.isfinite(t0) and all(np.all(np.isfinite(x)) for x in (p0, v0, a0, p_ref, v_ref))):
+            return self._fallback(t0, p0, v0, "nonfinite_input", tic)
+        if np.any(np.abs(v0) > self.vmax - cfg.backoff + self.amax * dt):
+            return self._fallback(t0, p0, v0, "infeasible_start", tic)
+        obs = [ob for ob in obstacles if finite_obstacle(ob)]
+        ignored = len(obstacles) - len(obs)
+        pts = np.zeros((0, 3)) if static_points is None else np.asarray(static_points, dtype=float).reshape(-1, 3)
+        pts = finite_rows(pts)
+        guided = guide is not None and np.all(np.isfinite(np.asarray(guide, dtype=float)))
+        guide = np.asarray(guide, dtype=float).reshape(Nf, 3)[self._take] if guided else None
+        acc0 = self._initial(t0, p0, v0, guide, p_ref)
+        pos0, vel0 = rollout(p0, v0, acc0, dt)
+        c = guide if guided else pos0[1:]
+        fwd = (p_ref[-1] - p0)[:2]
+        fwd = fwd / np.linalg.norm(fwd) if np.linalg.norm(fwd) > 1e-6 else np.array([1.0, 0.0])
+        side = np.array([-fwd[1], fwd[0], 0.0])
+        cand = dynamic_candidates(cfg, c, obs, side, (p_ref[-1] - p0) / (N * dt))
+        J, solver, lay, rows = self.problem(len(cand))
+        P = np.zeros(lay["np"])
+        P[0:3], P[3:6], P[6:9] = p0, v0, a0
+        P[lay["pref"]:lay["vref"]] = p_ref.ravel()
+        P[lay["vref"]:lay["o"]] = v_ref.ravel()
+        lbg, ubg = np.full(rows["m"], -np.inf), np.full(rows["m"], np.inf)
+        lbg[:rows["dyn"]] = ubg[:rows["dyn"]] = 0.0  # the dynamics
+        # moving obstacles: the nearest max_dynamic, exact
+        o, ia, am, live = np.zeros((N, J, 3)), np.zeros((N, J, 3)), np.ones((N, J)), np.zeros((N, J), bool)
+        for j, (_, _, oc, ax, _) in enumerate(cand):
+            o[:, j], ia[:, j], am[:, j], live[:, j] = oc, 1.0 / ax, ax.min(axis=1), True
+            band = (oc[:, 2] - ax[:, 2] <= cfg.z_min) & (oc[:, 2] + ax[:, 2] >= cfg.z_max)
+            ia[band, j, 2] = 0.0  # spans the altitude band: its elliptic cylinder
+            am[band, j] = ax[band, :2].min(axis=1)
+        P[lay["o"]:lay["ia"]] = o.ravel()
+        P[lay["ia"]:lay["am"]] = ia.ravel()
+        P[lay["am"]:lay["sn"]] = am.ravel()
+        lbg[rows["dyn"]:rows["sta"]] = np.where(live, 0.0, -np.inf).ravel()
+        # static structure: the OSQP MPC's planes at c
+        ns, bs = static_rows(cfg, c, pts, side, p0)
+        ok = np.isfinite(bs)
+        ns[~ok] = 0.0
+        P[lay["sn"]:] = ns.ravel()
+        lbg[rows["sta"]:] = np.where(ok, bs, -np.inf).ravel()
+        # bounds on w: accelerations, slacks >= 0, speeds (zero at the end: the terminal stop), altitude band,
+        # geofence
+        vb = np.tile(self.vmax - cfg.backoff, (N, 1))
+        vb[-1] = 0.0
+        zlo, zhi = altitude_band(cfg, p0, v0)
+        flo, fhi = self._fence(geofence, p0, v0)
+        xlo = np.column_stack([np.tile(flo, (N, 1)), zlo, -vb])
+        xhi = np.column_stack([np.tile(fhi, (N, 1)), zhi, vb])
+        lbx = np.r_[-np.tile(self.amax, N), np.zeros(2 * N), xlo.ravel()]
+        ubx = np.r_[np.tile(self.amax, N), np.full(2 * N, np.inf), xhi.ravel()]
+        w0 = np.r_[acc0.ravel(), np.zeros(2 * N), np.hstack([pos0[1:], vel0[1:]]).ravel()]
+        sol = solver(x0=w0, p=P, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx)
+        st = solver.stats()
+        iters = int(st.get("iter_count", 0))
+        w = np.array(sol["x"]).ravel()
+        if st.get("return_status") not in _OK:
+            return self._fallback(t0, p0, v0, str(st.get("return_status", "failed")).lower(), tic, iters, ignored)
+        if not np.all(np.isfinite(w)):
+            return self._fallback(t0, p0, v0, "nonfinite_solution", tic, iters, ignored)
+        acc = np.clip(w[:3 * N].reshape(N, 3), -self.amax, self.amax)
+        pos, vel = rollout(p0, v0, acc, dt)
+        slack_d = float(np.max(w[3 * N:4 * N], initial=0.0))
+        slack_s = float(np.max(w[4 * N:5 * N], initial=0.0))
+        self._prev = (float(t0), acc)
+        ms = (time.perf_counter() - tic) * 1e3
+        traj = Trajectory(float(t0), dt, pos, vel, acc, status="solved", solve_ms=ms)
+        return MPCResult(traj, "solved", iters, slack_d, slack_s, ms, ignored)
