@@ -245,7 +245,7 @@ class PassiveSafetyShield:
             k = int(np.argmin(np.where(safe, cost, np.inf)))
             if k == 0 and float(np.hypot(*v0[:2])) < c.hold_speed:
                 return self._hold(inp, nominal)
-            return self._fly(alt, k, inp, nominal, "shield:alternative")
+            return self._fly(alt, k, inp, nominal, "shield:alternative", still=k == 0)
         prev = self._previous(inp)
         if prev is not None and checked(prev)[0][0]:
             return self._fly(prev, 0, inp, nominal, "shield:committed stop")
@@ -253,7 +253,7 @@ class PassiveSafetyShield:
         stop = brake_and_hold(inp.stamp, p0, v0, a_max=c.a_emergency, dt=c.dt)
         motion = Candidates(stop.positions[None, :, :2], stop.velocities[None, :, :2], stop.accelerations[None, :, :2],
                             np.zeros((1, 2)), np.zeros(1, np.int64))
-        return self._fly(motion, 0, inp, nominal, "shield:emergency stop")
+        return self._fly(motion, 0, inp, nominal, "shield:emergency stop", still=True)
 
     def _sampled(self, tr: Trajectory, inp: PlannerInput, p0, v0) -> Candidates:
         """The planned trajectory from now on, on the commitment's grid, as one motion (2D)."""
@@ -292,15 +292,23 @@ class PassiveSafetyShield:
         n = int(round(c.commit_time / c.dt)) + 1
         motion = Candidates(np.repeat(self._anchor[None, None], n + 1, axis=1), np.zeros((1, n + 1, 2)),
                             np.zeros((1, n, 2)), np.zeros((1, 2)), np.zeros(1, np.int64))
-        return self._fly(motion, 0, inp, nominal, "shield:hold")
+        return self._fly(motion, 0, inp, nominal, "shield:hold", still=True)
 
-    def _fly(self, motion: Candidates, k: int, inp: PlannerInput, nominal: Trajectory, status: str) -> Trajectory:
-        """Motion k as the trajectory (the altitude and heading of the planner's plan)."""
+    def _fly(self, motion: Candidates, k: int, inp: PlannerInput, nominal: Trajectory, status: str,
+             still: bool = False) -> Trajectory:
+        """Motion k as the trajectory, with the heading of the planner's plan and its altitude; ``still`` (a
+        stop or a hold): the altitude's rate braked to zero at a_brake instead, so that at rest the drone
+        is at rest in all three axes."""
         c = self.cfg
         P, V, A = motion.P[k], motion.V[k], motion.A[k]
         n = A.shape[0]
-        z = np.array([nominal.sample(inp.stamp + q * c.dt)[0][2] for q in range(n + 1)])
-        vz = np.array([nominal.sample(inp.stamp + q * c.dt)[1][2] for q in range(n + 1)])
+        if still:
+            vz0 = float(inp.velocity[2])
+            vz = np.sign(vz0) * np.maximum(abs(vz0) - c.a_brake * c.dt * np.arange(n + 1), 0.0)
+            z = float(inp.position[2]) + np.r_[0.0, np.cumsum(0.5 * c.dt * (vz[:-1] + vz[1:]))]
+        else:
+            z = np.array([nominal.sample(inp.stamp + q * c.dt)[0][2] for q in range(n + 1)])
+            vz = np.array([nominal.sample(inp.stamp + q * c.dt)[1][2] for q in range(n + 1)])
         az = np.diff(vz) / c.dt
         self._committed = Candidates(motion.P[k:k + 1].copy(), motion.V[k:k + 1].copy(), motion.A[k:k + 1].copy(),
                                      np.zeros((1, 2)), motion.commit[k:k + 1].copy())
