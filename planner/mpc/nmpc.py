@@ -93,6 +93,27 @@ def _build(cfg: MPCConfig, ncfg: NMPCConfig, J: int):
     return ca.nlpsol(f"nmpc{J}", "ipopt", {"x": w, "p": params, "f": cost, "g": g}, opts), lay, rows
 
 
+def _outside(c, cand, cfg: MPCConfig, bias: float) -> np.ndarray:
+    """The initial guess's positions c (N, 3) moved out of every candidate's ellipse (dynamic_candidates),
+    radially from its centre: the side it is passed on is the guess's. Where c_k lies within ``bias`` of the
+    obstacle's line of relative motion (a symmetric head-on start, whose gradient cannot pick a side), the
+    offset is first raised to ``bias`` along the candidate's tie-break side (planner.mpc.rows.dynamic_rows)."""
+    c = np.array(c, dtype=float)
+    for _, _, o, ax, side in cand:
+        band = (o[:, 2] - ax[:, 2] <= cfg.z_min) & (o[:, 2] + ax[:, 2] >= cfg.z_max)
+        d = c - o
+        d[band, 2] = 0.0  # an elliptic cylinder: horizontal offsets
+        lat = d @ side
+        lift = np.where(np.abs(lat) < bias, np.where(lat < 0, -bias, bias) - lat, 0.0)
+        d += lift[:, None] * side
+        f = np.sqrt(np.sum((d / ax) ** 2, axis=1))
+        inside = f < 1.0
+        d[inside] /= np.maximum(f[inside, None], 1e-9) / 1.01
+        moved = inside | (lift != 0)
+        c[moved] = o[moved] + d[moved] + np.where(band[moved, None], [0.0, 0.0, 1.0], 0.0) * (c[moved] - o[moved])
+    return c
+
+
 class NMPC:
     """CasADi NLPs built once (one per bucket of moving-obstacle counts, on first use); ``solve`` fills the
     parameters and bounds and runs IPOPT (module docstring). Same interface as planner.mpc.solver.MPC."""
@@ -185,6 +206,7 @@ class NMPC:
         side = np.array([-fwd[1], fwd[0], 0.0])
         cand = dynamic_candidates(cfg, c, obs, side, (p_ref[-1] - p0) / (N * dt))
         J, solver, lay, rows = self.problem(len(cand))
+        pos0[1:] = _outside(pos0[1:] if not guided else guide, cand, cfg, 0.0 if guided else cfg.side_bias)
         P = np.zeros(lay["np"])
         P[0:3], P[3:6], P[6:9] = p0, v0, a0
         P[lay["pref"]:lay["vref"]] = p_ref.ravel()
@@ -218,7 +240,7 @@ class NMPC:
         xhi = np.column_stack([np.tile(fhi, (N, 1)), zhi, vb])
         lbx = np.r_[-np.tile(self.amax, N), np.zeros(2 * N), xlo.ravel()]
         ubx = np.r_[np.tile(self.amax, N), np.full(2 * N, np.inf), xhi.ravel()]
-        w0 = np.r_[acc0.ravel(), np.zeros(2 * N), np.hstack([pos0[1:], vel0[1:]]).ravel()]
+        w0 = np.r_[acc0.ravel(), np.zeros(2 * N), np.hstack([pos0[1:], vel0[1:]]).ravel()]  # x_k need not follow u_k
         sol = solver(x0=w0, p=P, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx)
         st = solver.stats()
         iters = int(st.get("iter_count", 0))
