@@ -72,20 +72,21 @@ def _same(a: Trajectory, b: Trajectory | None) -> bool:
             and np.array_equal(a.velocities, b.velocities) and np.array_equal(a.accelerations, b.accelerations))
 
 
-def record(scenario: str, seed: int, perception: str = "dodt", **episode) -> tuple[list[_Snapshot], EpisodeContext]:
-    """The planner inputs and plans of one closed-loop episode with the default planner (``episode``:
+def record(scenario: str, seed: int, perception: str = "dodt", planner: str = DEFAULT_PLANNER,
+           **episode) -> tuple[list[_Snapshot], EpisodeContext]:
+    """The planner inputs and plans of one closed-loop episode with a built-in planner (``episode``:
     experiments.episode_config.EpisodeConfig fields), and the episode's context."""
-    rec = _Recorder(make_planner(DEFAULT_PLANNER, load_vehicle().radius))
+    rec = _Recorder(make_planner(planner, load_vehicle().radius))
     run_episode(scenario, seed=seed, perception=perception, planner=rec, cfg=EpisodeConfig(**episode))
     return rec.snapshots, replace(rec.context, static_map=None, seen=None)
 
 
-def replay(snapshots: list[_Snapshot], context: EpisodeContext, repeats: int = 3) -> dict:
-    """Times (ms) of every plan call over ``repeats`` replays, and how many replayed plans (of all replays)
-    equal the loop's."""
-    times, same = [], 0
+def replay(snapshots: list[_Snapshot], context: EpisodeContext, repeats: int = 3, planner: str = DEFAULT_PLANNER) -> dict:
+    """Times (ms) of every plan call of the built-in ``planner`` (the one recorded) over ``repeats`` replays,
+    and how many replayed plans (of all replays) equal the loop's."""
+    spec, times, same = planner, [], 0
     for _ in range(repeats):
-        planner = make_planner(DEFAULT_PLANNER, context.vehicle.radius)
+        planner = make_planner(spec, context.vehicle.radius)
         planner.reset(context)
         run, version, m = [], None, None
         for s in snapshots:
@@ -102,18 +103,20 @@ def replay(snapshots: list[_Snapshot], context: EpisodeContext, repeats: int = 3
     return {"ms": np.array(times), "same": same, "n": len(snapshots) * repeats}
 
 
-def run(scenario: str = "corridor", seeds=(0, 1), perception: str = "dodt", repeats: int = 3) -> dict:
-    """Records and replays ``seeds`` of ``scenario``; prints and returns the figures."""
+def run(scenario: str = "corridor", seeds=(0, 1), perception: str = "dodt", repeats: int = 3,
+        planner: str = DEFAULT_PLANNER) -> dict:
+    """Records and replays ``seeds`` of ``scenario`` with a built-in planner; prints and returns the figures."""
     per_rep, same, n = [], 0, 0
     for seed in seeds:
-        r = replay(*record(scenario, seed, perception), repeats=repeats)
+        r = replay(*record(scenario, seed, perception, planner), repeats=repeats, planner=planner)
         per_rep.append(r["ms"])
         same, n = same + r["same"], n + r["n"]
     ms = np.concatenate(per_rep, axis=1)  # (repeats, plans)
     stats = {q: float(np.median([np.percentile(row, p) for row in ms])) for q, p in
              (("median_ms", 50), ("p95_ms", 95), ("p99_ms", 99))}
-    out = dict(stats, plans=n // repeats, repeats=repeats, same_as_loop=same, compared=n, max_ms=float(ms.max()))
-    print(f"planner replay, {scenario} seeds {','.join(map(str, seeds))}, perception {perception}: {n // repeats} "
+    out = dict(stats, plans=n // repeats, repeats=repeats, same_as_loop=same, compared=n, max_ms=float(ms.max()),
+               planner=planner)
+    print(f"planner {planner} replay, {scenario} seeds {','.join(map(str, seeds))}, perception {perception}: {n // repeats} "
           f"plans x {repeats} replays; per plan median {stats['median_ms']:.2f} ms, p95 {stats['p95_ms']:.2f} ms, "
           f"p99 {stats['p99_ms']:.2f} ms (medians over the replays); replayed plans equal to the loop's: {same}/{n}")
     return out
@@ -137,7 +140,8 @@ def _corridor_context(length: float = 15.0, width: float = 4.0) -> EpisodeContex
         goal=np.array([length - 0.5, 0.0, 1.2]), geofence=(np.array([0.0, -width / 2]), np.array([length, width / 2])))
 
 
-def people_scaling(counts=(10, 50, 200), plans: int = 20, seed: int = 0, radius: float = 6.0) -> dict:
+def people_scaling(counts=(10, 50, 200), plans: int = 20, seed: int = 0, radius: float = 6.0,
+                   planner: str = DEFAULT_PLANNER) -> dict:
     """Milliseconds per plan of the default planner (shield, maneuvers and MPC) against the number of people
     in range: each plan sees ``n`` people (0.5 x 0.5 x 1.8 m, walking 0.5-1.5 m/s in random directions) placed
     uniformly within ``radius`` m of the drone, which flies down the corridor at 1 m/s over a known-free
@@ -146,8 +150,8 @@ def people_scaling(counts=(10, 50, 200), plans: int = 20, seed: int = 0, radius:
     rng = np.random.default_rng(seed)
     out = {}
     for n in counts:
-        planner = make_planner(DEFAULT_PLANNER, 0.2)
-        reset_with_context(planner, _corridor_context())
+        nav = make_planner(planner, 0.2)
+        reset_with_context(nav, _corridor_context())
         free = VoxelMap()  # an empty static map, known free: the shield checks every plan against the people
         free.set_known(np.zeros(free.log_odds.shape, dtype=bool))
         ms = []
@@ -163,10 +167,10 @@ def people_scaling(counts=(10, 50, 200), plans: int = 20, seed: int = 0, radius:
             inp = PlannerInput(stamp=0.1 * k, position=p, velocity=np.array([1.0, 0.0, 0.0]), acceleration=np.zeros(3),
                                goal=np.array([14.5, 0.0, 1.2]), obstacles=obs, yaw=0.0, occupancy=free)
             t = time.perf_counter()
-            planner.plan(inp)
+            nav.plan(inp)
             ms.append((time.perf_counter() - t) * 1e3)
         ms = np.array(ms[1:])
         out[n] = {"median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)), "plans": plans}
-        print(f"planner with {n} people within {radius:g} m: {out[n]['median_ms']:.1f} ms per plan median, "
+        print(f"planner {planner} with {n} people within {radius:g} m: {out[n]['median_ms']:.1f} ms per plan median, "
               f"{out[n]['p95_ms']:.1f} ms p95 ({plans} plans)")
     return out

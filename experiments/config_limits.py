@@ -169,6 +169,7 @@ ANY_STRING = Limit(kind="string")
 RENDERER_CHOICES = ("auto", "gl", "pybullet", "tiny", "egl")  # sim.scenario.RENDERER_CHOICES
 # the named sensor rigs (sim.rig.RIGS; not imported here: it loads the simulator)
 RIG_NAMES = ("front", "front_back", "surround4", "lidar")
+PLANNER_NAMES = ("default", "nmpc")  # the built-in planners (experiments.registry.BUILTIN_PLANNERS), default first
 STATIC_MAPS = ("depth", "truth")  # the static maps an episode can fly with (EpisodeConfig.static_map)
 LEARNED_LAYOUTS = ("auto", "dodt", "yolov8", "yolov5", "yolox")  # "auto" + dodt.learned.yolo.LAYOUTS
 LEARNED_VIEWS = ("full", "flip", "center", "center-flip")  # dodt.learned.views.VIEWS
@@ -261,6 +262,7 @@ LIMITS: dict[str, Limit] = {
     "navigator.maneuvers.along": _real(-10.0, 10.0, length=(1, 12)),  # m/s
     "navigator.maneuvers.across": _real(-10.0, 10.0, length=(1, 12)),  # m/s
     "navigator.maneuvers.t_switch": _SPAN,
+    "navigator.maneuvers.max_speed": _real(0.0, 10.0, lo_open=True, optional=True),  # m/s; none: per axis only
     "navigator.maneuvers.p_keep": _FRACTION,
     "navigator.maneuvers.p_stop": _FRACTION,
     "navigator.maneuvers.p_turn": _FRACTION,

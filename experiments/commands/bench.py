@@ -8,7 +8,7 @@ from pathlib import Path
 
 from sim.scenario import RENDERER_CHOICES, load_scenario
 
-from experiments.config_limits import RIG_NAMES
+from experiments.config_limits import PLANNER_NAMES, RIG_NAMES
 from experiments.commands.common import (RENDERER_HELP, LazyText, UserError, add_command, dodt_presets, examples,
                                          output_folder, seconds, whole, writable_file)
 
@@ -31,6 +31,7 @@ APPLIES_TO = {
     "--renderer": ("loop",),
     "--people": ("planner",),
     "--rig": ("perception", "runtime", "loop"),
+    "--planner": ("planner", "loop"),
 }
 # The value of an option that was not given, where it has one (the rest: None, --quick False).
 DEFAULTS = {"--scenario": "corridor", "--seconds": 10.0, "--out": "runs/bench_perception", "--config": "dodt",
@@ -84,6 +85,8 @@ def add_parser(sub) -> None:
                  "every configuration reads them all (perception: recall counts the people all round, in view or "
                  "not; runtime: the other cameras' and the LiDAR's modules are timed too)",
         choices=RIG_NAMES)
+    opt("--planner", "a built-in planner: default (the OSQP MPC) or nmpc (the CasADi NMPC)",
+        choices=PLANNER_NAMES)
 
 
 def _counts(text: str) -> tuple[int, ...]:
@@ -153,15 +156,16 @@ def cmd_bench(args) -> int:
         from experiments.bench_map import bench_update
         from experiments.bench_mpc import bench_mpc
 
+        planner = args.planner or PLANNER_NAMES[0]
         if args.people:
-            out = bench_planner.people_scaling(args.people)
+            out = bench_planner.people_scaling(args.people, planner=planner)
             if args.json:
                 args.json.write_text(json.dumps(out, indent=1) + "\n")
             return 0
         bench_update()
         for seed in range(3):
-            bench_mpc(seed=seed)
-        out = bench_planner.run(args.scenario, range(args.seeds or 2), perception=args.config)
+            bench_mpc(seed=seed, solver=planner)
+        out = bench_planner.run(args.scenario, range(args.seeds or 2), perception=args.config, planner=planner)
         if args.json:
             args.json.write_text(json.dumps(out, indent=1) + "\n")
         return 0
@@ -172,11 +176,13 @@ def cmd_bench(args) -> int:
         runs = []
         for _ in range(3):  # the same episode three times: the median real-time factor is quoted
             runs.append(run_episode(sc, seed=0, perception=args.config, renderer=args.renderer,
+                                    planner=args.planner or PLANNER_NAMES[0],
                                     cfg=EpisodeConfig(duration=args.seconds, rig=args.rig)))
         rtf = [s["timing"]["real_time_factor"] for s in runs]
         s = sorted(runs, key=lambda r: r["timing"]["real_time_factor"])[1]
         tm = s["timing"]
-        print(f"closed loop, {sc.name} seed 0, perception {args.config}, rig {s['rig']}, frame latency "
+        print(f"closed loop, {sc.name} seed 0, perception {args.config}, planner {s['planner']}, rig {s['rig']}, "
+              f"frame latency "
               f"{s['frame_latency']}: "
               f"{s['sim_time']:.1f} s simulated; real-time factor median {tm['real_time_factor']}x of "
               f"{', '.join(f'{x}x' for x in rtf)} ({tm['renderer']} renderer)")
