@@ -263,7 +263,6 @@ LIMITS: dict[str, Limit] = {
     "navigator.maneuvers.along": _real(-10.0, 10.0, length=(1, 12)),  # m/s
     "navigator.maneuvers.across": _real(-10.0, 10.0, length=(1, 12)),  # m/s
     "navigator.maneuvers.t_switch": _SPAN,
-    "navigator.maneuvers.max_speed": _real(0.0, 10.0, lo_open=True, optional=True),  # m/s; none: per axis only
     "navigator.maneuvers.p_keep": _FRACTION,
     "navigator.maneuvers.p_stop": _FRACTION,
     "navigator.maneuvers.p_turn": _FRACTION,

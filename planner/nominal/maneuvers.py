@@ -49,8 +49,6 @@ class ManeuverConfig:
     along: tuple[float, ...] = (-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)  # m/s target speeds along the guide
     across: tuple[float, ...] = (-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5)  # m/s target speeds to its left
     t_switch: float = 1.0  # s: the first target is held this long, the second after
-    max_speed: float | None = None  # m/s: targets faster than this (along and across together) are scaled down
-    # to it; None: only the per-axis limit (the MPC's v_max_xy); ours
     # futures of a moving obstacle
     p_keep: float = 0.55  # prior of its own prediction
     p_stop: float = 0.05  # of stopping
@@ -538,9 +536,6 @@ class ManeuverSelector:
         e = e / max(np.linalg.norm(e), 1e-9)
         n = np.array([-e[1], e[0]])
         T = self._grid @ np.stack([e, n])  # world targets (T, 2)
-        if self.cfg.max_speed is not None:
-            sp = np.hypot(T[:, 0], T[:, 1])
-            T = T * np.minimum(1.0, self.cfg.max_speed / np.maximum(sp, 1e-9))[:, None]
         vb = self.v_max - 0.01
         T = np.clip(T, -vb, vb)
         acc = previous_acc
@@ -557,7 +552,7 @@ class ManeuverSelector:
         if approach is not None:
             r = len(P) - extra
             P[r], V[r], A[r] = _approach(p0, v0, np.asarray(approach, float)[:2], self.N, self.dt, self.a_max,
-                                         min(max(self.cfg.along), vb, self.cfg.max_speed or math.inf), 0.5 * self.a_max)
+                                         min(max(self.cfg.along), vb), 0.5 * self.a_max)
         if acc is not None:
             vel = np.clip(np.vstack([v0, v0 + self.dt * np.cumsum(acc, axis=0)]), -vb, vb)
             acc = np.diff(vel, axis=0) / self.dt
