@@ -1,26 +1,29 @@
 """Non-linear MPC in CasADi: the OSQP MPC's problem (planner.mpc.solver) with exact clearance to people
 and a terminal stop, solved by IPOPT.
 
-Decision vector w = [u_0..u_{N-1}, sd_1..sd_N, ss_1..ss_N] (5 N): the accelerations and one dynamic and
-one static slack per step (metres, >= 0). The states are the double integrator's rollout of u from
-(p_0, v_0), symbolic in the parameters, so the dynamics hold exactly and are not constraints.
+Grid: N = horizon // stride steps of dt * stride (NMPCConfig.stride MPC steps each); the references and
+the guide are taken at those knots. Variables w = [u_0..u_{N-1}, sd_1..sd_N, ss_1..ss_N, x_1..x_N]:
+the accelerations, one dynamic and one static slack per step (metres, >= 0), and the states
+x_k = (p_k, v_k), tied by the double integrator's equality rows (multiple shooting: sparse derivatives
+for IPOPT's linear solver, and the limits become bounds on w).
     Cost: the OSQP MPC's (2), the same weights (MPCConfig).
-    Bounds: |u_k| <= a_max; |v_k| <= v_max - backoff (k = 1..N-1); v_N = 0: the plan ends at rest
-        (passive safety: what the drone commits to always contains a stop); z_min <= p_k,z <= z_max
-        widened to the vertical braking path as the OSQP MPC does.
+    Bounds: |u_k| <= a_max; |v_k| <= v_max - backoff, v_N = 0: the plan ends at rest (passive safety:
+        what the drone commits to always contains a stop); z_min <= p_k,z <= z_max widened to the
+        vertical braking path, as the OSQP MPC's (3); x, y within the geofence less geofence_margin,
+        widened to the horizontal braking path (inside the margin: no closer).
     Moving obstacle j, step k (exact, not linearised): with f = sum_i ((p_k,i - o_i) / a_i)^2 the
         OSQP MPC's ellipsoid (4) (semi-axes growing with the prediction's standard deviation; an
         ellipsoid spanning the altitude band becomes its elliptic cylinder),
             min_i(a_i) (sqrt(f) - 1) + sd_k >= 0,
         about the metres by which p_k keeps out of it; non-convex, so the solution is a local one near
-        the initial guess, and the initial guess is the maneuver layer's chosen motion (the guide): it
-        picks the passing side, as the guide's linearisation does for the QP.
-    Static structure and the geofence: the OSQP MPC's half-spaces (5) and (6) (linear), on ss_k.
-The problem is built once (SX expressions, one ``nlpsol``); every call only passes parameters and
-bounds. Warm start: the guide's accelerations, else the previous solution shifted in time.
+        the initial guess: the guide (the maneuver layer's chosen motion) moved radially out of every
+        ellipse, so the guide picks the passing side as its linearisation does for the QP.
+    Static structure: the OSQP MPC's separating planes (5) at the guide (linear rows), on ss_k.
+One ``nlpsol`` (SX expressions) per bucket of obstacle counts, all built at construction; every call only
+passes parameters, bounds and the initial guess (the guide's, else the previous solution shifted).
 
-The solver is a drop-in for planner.mpc.solver.MPC (same ``solve`` and result); the navigator picks it
-with ``NavigatorConfig.solver = "nmpc"`` (``--planner nmpc``).
+The solver is a drop-in for planner.mpc.solver.MPC (same ``solve`` and result); the navigator uses it
+when built with ``solver="nmpc"`` (``--planner nmpc``).
 """
 from __future__ import annotations
 
@@ -115,7 +118,7 @@ def _outside(c, cand, cfg: MPCConfig, bias: float) -> np.ndarray:
 
 
 class NMPC:
-    """CasADi NLPs built once (one per bucket of moving-obstacle counts, on first use); ``solve`` fills the
+    """CasADi NLPs built once (one per bucket of moving-obstacle counts); ``solve`` fills the
     parameters and bounds and runs IPOPT (module docstring). Same interface as planner.mpc.solver.MPC."""
 
     def __init__(self, cfg: MPCConfig = MPCConfig(), ncfg: NMPCConfig = NMPCConfig()):
@@ -130,6 +133,8 @@ class NMPC:
         self._take = ncfg.stride * np.arange(1, self.N + 1) - 1  # the references' knots on the NMPC's grid
         self.buckets = _buckets(cfg)
         self._problems: dict[int, tuple] = {}
+        for J in self.buckets:  # built now (some 50 ms each), not on a plan's time
+            self.problem(J)
         self.amax = np.array([cfg.a_max_xy, cfg.a_max_xy, cfg.a_max_z])
         self.vmax = np.array([cfg.v_max_xy, cfg.v_max_xy, cfg.v_max_z])
         self.reset()
