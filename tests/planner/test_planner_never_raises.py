@@ -1,5 +1,5 @@
-"""Property: the default planner (whatever ``experiments.registry.make_planner`` returns) never raises
-and always returns a finite trajectory, whatever its input: positions, velocities, stamps and goals that
+"""Property: the built-in planners (whatever ``experiments.registry.make_planner`` returns) never raise
+and always return a finite trajectory, whatever their input: positions, velocities, stamps and goals that
 are NaN, infinite or huge, obstacles with such values, occupancy maps of any content, inverted or
 missing geofences, and such inputs arriving after valid plans (its state carried from one call to the
 next). A planner that replaces it must pass the same tests."""
@@ -104,9 +104,9 @@ def assert_finite_trajectory(tr) -> None:
         assert all(np.all(np.isfinite(x)) for x in tr.sample(t))
 
 
-@pytest.fixture(scope="module")
-def planner():
-    pl = make_planner(DEFAULT_PLANNER, ROBOT_RADIUS)
+@pytest.fixture(scope="module", params=[DEFAULT_PLANNER, "nmpc"])
+def planner(request):
+    pl = make_planner(request.param, ROBOT_RADIUS)
     pl.plan(_valid(0.0))  # compile what it compiles once, outside the examples
     return pl
 
