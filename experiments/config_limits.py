@@ -263,7 +263,6 @@ LIMITS: dict[str, Limit] = {
     "navigator.maneuvers.along": _real(-10.0, 10.0, length=(1, 12)),  # m/s
     "navigator.maneuvers.across": _real(-10.0, 10.0, length=(1, 12)),  # m/s
     "navigator.maneuvers.t_switch": _SPAN,
-    "navigator.maneuvers.structure_stop": _real(-1.0, 5.0, optional=True),  # m of static clearance; none: off
     "navigator.maneuvers.p_keep": _FRACTION,
     "navigator.maneuvers.p_stop": _FRACTION,
     "navigator.maneuvers.p_turn": _FRACTION,

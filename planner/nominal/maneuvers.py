@@ -71,9 +71,6 @@ class ManeuverConfig:
     t_fade: float = 0.8  # ... fading after with this time constant (later steps are replanned anyway)
     # its other futures are answered by replanning once they show: from react_delay on the drone can accelerate
     # away at evade_accel, so under them the separation needed shrinks by evade_accel (t - react_delay)^2 / 2
-    structure_stop: float | None = 0.1  # m: a future whose centre comes this near structure (static clearance,
-    # the geofence's walls included) stops there: people do not walk through boxes and walls, so space behind
-    # them is safe from their turns; None: futures pass through structure; ours
     react_delay: float = 0.3  # s: a turn shows in the velocity and reaches a new plan (perception, 10 Hz plans)
     evade_accel: float = 2.0  # m/s^2, within the MPC's limit
     t_full_alt: float = 1.2  # s of full weight on the other futures...
@@ -204,28 +201,6 @@ _TURN_SIZE = np.abs(_TURNS)[:, None]  # (7, 1)
 _TURN_SIGN = np.sign(_TURNS)[:, None]
 _TURN_PACE = np.array([max(math.cos(a / 2), 0.3) for a in np.abs(_TURNS)])[:, None]  # speed factor while turning
 _START_HEADINGS = np.array([[math.cos(h), math.sin(h)] for h in np.arange(8) * (math.pi / 4)])  # (8, 2)
-
-
-def stop_at_structure(O: np.ndarray, clear: np.ndarray, origin_xy, resolution: float, near: float | None) -> np.ndarray:
-    """The futures' centres O (H, K, 2) with each future held from the first step whose cell has a static
-    clearance (``clear``, on the grid at origin_xy) below ``near`` on: the person stops where structure
-    begins, at their last position before it (at the first step's own, if that one already is). Outside
-    the grid nothing is held. None: O unchanged."""
-    if near is None or O.size == 0:
-        return O
-    ij = np.floor((O - np.asarray(origin_xy, float)[:2]) / resolution)
-    inside = np.all((ij >= 0) & (ij < np.array(clear.shape)), axis=2) & np.all(np.isfinite(O), axis=2)
-    ij = np.where(inside[..., None], ij, 0).astype(np.int64)
-    blocked = inside & (clear[ij[..., 0], ij[..., 1]] < near)
-    hit = blocked.any(axis=1)
-    if not hit.any():
-        return O
-    O = O.copy()
-    first = np.argmax(blocked, axis=1)
-    for h in np.flatnonzero(hit):
-        k = first[h]
-        O[h, k:] = O[h, k - 1] if k > 0 else O[h, 0]
-    return O
 
 
 def hypotheses(ob: ObstaclePrediction, times: np.ndarray, cfg: ManeuverConfig):
@@ -603,7 +578,6 @@ class ManeuverSelector:
         P, V, A = self.candidates(p0, v0, guide_dir, prev_acc, q, out=self._buffers, full=False)
         stop = _stopping_points(P, V, 2 * cfg.brake)
         O, R, G, owner, prior = self._obstacle_terms(obstacles, p0, v0)
-        O = stop_at_structure(O, clear, origin_xy, resolution, cfg.structure_stop)
         keep = prev_pos[1:cfg.keep_steps + 1] if prev_pos is not None else np.zeros((0, 2))
         parts = np.empty(5)
         b, cost = _best(P, A, stop, clear, goal_field, float(origin_xy[0]), float(origin_xy[1]), float(resolution),

@@ -437,24 +437,3 @@ def test_futures_of_several_obstacles_are_each_ones_own():
         one, wo = hypotheses(ob, t, cfg)
         assert np.array_equal(paths[start:start + n], one) and np.array_equal(w[start:start + n], wo)
         start += n
-
-
-def test_futures_stop_where_structure_begins():
-    """A future walking into a wall is held at its last position before it; one that stays clear, or leaves
-    the grid, is unchanged; None turns the rule off."""
-    from planner.map.clearance import static_clearance
-    from planner.nominal.maneuvers import stop_at_structure
-
-    blocked = np.zeros((40, 20), bool)
-    blocked[20:, :] = True  # a wall from x = 2.0 m on (0.1 m cells, origin 0)
-    clear = static_clearance(blocked, 0.1)
-    t = 0.1 * np.arange(1, 26)
-    into = np.column_stack([0.5 + 1.0 * t, np.full(25, 1.0)])  # reaches the wall at t = 1.5 s
-    along = np.column_stack([np.full(25, 0.5), 0.2 + 0.05 * t])
-    out = np.column_stack([0.5 - 1.0 * t, np.full(25, 1.0)])  # leaves the grid backwards
-    O = np.stack([into, along, out])
-    held = stop_at_structure(O, clear, (0.0, 0.0), 0.1, 0.1)
-    k = int(np.argmax(held[0, :, 0] >= held[0, -1, 0]))
-    assert 1.75 <= held[0, -1, 0] < 1.9 and np.all(held[0, k:] == held[0, -1]) and np.all(held[0, :k] == into[:k])
-    assert np.array_equal(held[1], along) and np.array_equal(held[2], out)
-    assert stop_at_structure(O, clear, (0.0, 0.0), 0.1, None) is O
