@@ -317,20 +317,6 @@ def _column_any(L, l_occ, k0, k1):
     return out
 
 
-@njit(cache=True, nogil=True)
-def _column_all_below(L, l_min, k0, k1):
-    """(nx, ny) bool: every one of L[i, j, k0:k1 + 1] < l_min (never observed)."""
-    nx, ny = L.shape[0], L.shape[1]
-    out = np.ones((nx, ny), np.bool_)
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(k0, k1 + 1):
-                if L[i, j, k] >= l_min:
-                    out[i, j] = False
-                    break
-    return out
-
-
 class VoxelMap:
     """Occupancy grid over [origin, origin + size); voxel (i, j, k) covers origin + res*[i, i+1) per axis.
 
@@ -598,22 +584,6 @@ class VoxelMap:
         if bits is None:
             bits = self._columns["bits"] = _column_bits(self.log_odds, self.l_occ)
         return bits
-
-    def column_unobserved(self, z_lo: float, z_hi: float) -> np.ndarray:
-        """(nx, ny) bool: a column is unobserved if no voxel overlapping the band [z_lo, z_hi] was ever
-        observed (free or occupied). Read-only and cached per map version, as column_blocked."""
-        k0 = max(int(np.floor((z_lo - self.origin[2]) / self.res)), 0)
-        k1 = min(int(np.floor((z_hi - self.origin[2]) / self.res)), int(self.dims[2]) - 1)
-        self._columns_current()
-        key = ("unobserved", k0, k1)
-        col = self._columns.get(key)
-        if col is None:
-            seen = float(self.l_unknown) + 0.5 * self.cfg.unknown_offset  # between unknown and float32(l_min)
-            col = _column_all_below(self.log_odds, seen, k0, k1) if k1 >= k0 else np.zeros(
-                tuple(self.dims[:2]), bool)
-            col.flags.writeable = False
-            self._columns[key] = col
-        return col
 
     def column_blocked(self, z_lo: float, z_hi: float, inflate: bool = True) -> np.ndarray:
         """(nx, ny) bool: a column is blocked if a voxel overlapping the band [z_lo, z_hi] is occupied,
