@@ -37,11 +37,12 @@ def bench_mpc(n: int = 300, seed: int = 0, cfg: MPCConfig = MPCConfig(), verbose
         fallbacks += r.status != "solved"
         slack = max(slack, r.max_slack_dynamic, r.max_slack_static)
         tr = r.trajectory
-        flown += float(np.linalg.norm(tr.positions[1] - p))
+        before = p
         if tr.dt == dt:
             p, v, a = tr.positions[1].copy(), tr.velocities[1].copy(), tr.accelerations[0].copy()
         else:  # the NMPC's coarser grid
             p, v, a = tr.sample(k * dt + dt)
+        flown += float(np.linalg.norm(p - before))
         pc += pv * dt
         pv[:, 1] *= np.where((pc[:, 1] < -1.6) | (pc[:, 1] > 0.9), -1.0, 1.0)
         pv[:, 0] *= np.where((pc[:, 0] < 0.0) | (pc[:, 0] > 15.0), -1.0, 1.0)
