@@ -304,6 +304,7 @@ def _partition_kth(a, k):
     return np.partition(a, k)[k]  # numba's np.partition, as _box_points called it
 
 
+@pytest.mark.slow
 def test_kth_smallest_is_partitions():
     from dodt.udepth import _kth_smallest
 

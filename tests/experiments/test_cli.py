@@ -139,7 +139,7 @@ def test_episode_commands_help_lists_modes_presets_and_the_planner(capsys, comma
     listed = " ".join(epilog.split())  # names wrapped over lines
     for name in known_modes() + tuple(PRESETS):
         assert f" {name}," in listed or f" {name} " in listed or listed.endswith(f" {name}")
-    assert f"built-in planner (--planner): {DEFAULT_PLANNER} (" in listed
+    assert f"built-in planners (--planner): {DEFAULT_PLANNER} (" in listed and ", nmpc (" in listed
 
 
 # An option of `bench` and a bench it does not apply to, with the benches it does.

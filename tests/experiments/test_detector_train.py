@@ -109,6 +109,7 @@ def test_targets_follow_the_decode_on_the_stride_8_grid():
         layout.decode(raw[:4], 0.5)
 
 
+@pytest.mark.slow
 def test_stride_8_model_trains_exports_and_runs_at_run_time(data_dir, tmp_path):
     from dodt.learned.model import PersonDetector2D
 

@@ -104,7 +104,7 @@ def assert_finite_trajectory(tr) -> None:
         assert all(np.all(np.isfinite(x)) for x in tr.sample(t))
 
 
-@pytest.fixture(scope="module", params=[DEFAULT_PLANNER, "nmpc"])
+@pytest.fixture(scope="module", params=[DEFAULT_PLANNER, pytest.param("nmpc", marks=pytest.mark.slow)])
 def planner(request):
     pl = make_planner(request.param, ROBOT_RADIUS)
     pl.plan(_valid(0.0))  # compile what it compiles once, outside the examples
