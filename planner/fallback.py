@@ -47,6 +47,13 @@ def brake_and_hold(t0: float, position, velocity, a_max: float = 2.0, dt: float 
                       velocities=V, accelerations=A, status=status)
 
 
+def braking_1d(x0: float, v0: float, a: float, dt: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """One axis braked from (x0, v0) at ``a`` to rest and held: positions and velocities (n + 1,) at the knots
+    0, dt, ..., n dt (the speed falls by a dt per step, to zero; positions by the trapezoid of the speeds)."""
+    v = np.sign(v0) * np.maximum(abs(v0) - a * dt * np.arange(n + 1), 0.0)
+    return x0 + np.r_[0.0, np.cumsum(0.5 * dt * (v[:-1] + v[1:]))], v
+
+
 # m, m/s, m/s^2: larger positions, velocities or accelerations are not a vehicle's (a position of 1e308 m,
 # finite, left a path of infinite length behind that failed the next plan); NaN compares false: refused too
 _PLAUSIBLE = 1e6

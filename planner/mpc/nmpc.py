@@ -37,7 +37,7 @@ import numpy as np
 from planner.mpc.config import MPCConfig, NMPCConfig
 from planner.mpc.qp import rollout
 from planner.mpc.rows import dynamic_candidates, finite_rows, static_rows
-from planner.mpc.solver import MPCResult, altitude_band, brake_result
+from planner.mpc.solver import MPCResult, altitude_band, brake_result, finite_geofence
 from planner.types import Trajectory, finite_obstacle
 
 __all__ = ["NMPC", "NMPCConfig"]
@@ -96,14 +96,20 @@ def _build(cfg: MPCConfig, ncfg: NMPCConfig, J: int):
     return ca.nlpsol(f"nmpc{J}", "ipopt", {"x": w, "p": params, "f": cost, "g": g}, opts), lay, rows
 
 
-def _outside(c, cand, cfg: MPCConfig, bias: float) -> np.ndarray:
-    """The initial guess's positions c (N, 3) moved out of every candidate's ellipse (dynamic_candidates),
-    radially from its centre: the side it is passed on is the guess's. Where c_k lies within ``bias`` of the
-    obstacle's line of relative motion (a symmetric head-on start, whose gradient cannot pick a side), the
-    offset is first raised to ``bias`` along the candidate's tie-break side (planner.mpc.rows.dynamic_rows)."""
+def _spans_band(cfg: MPCConfig, o, ax) -> np.ndarray:
+    """(N,) bool: steps at which the ellipsoid (centres o, semi-axes ax (N, 3)) spans the whole altitude band,
+    and counts as its elliptic cylinder (planner.mpc.rows' rule)."""
+    return (o[:, 2] - ax[:, 2] <= cfg.z_min) & (o[:, 2] + ax[:, 2] >= cfg.z_max)
+
+
+def _outside(c, cand, bands, bias: float) -> np.ndarray:
+    """The initial guess's positions c (N, 3) moved out of every candidate's ellipse (dynamic_candidates;
+    bands: _spans_band of each), radially from its centre: the side it is passed on is the guess's. Where
+    c_k lies within ``bias`` of the obstacle's line of relative motion (a symmetric head-on start, whose
+    gradient cannot pick a side), the offset is first raised to ``bias`` along the candidate's tie-break
+    side (planner.mpc.rows.dynamic_rows)."""
     c = np.array(c, dtype=float)
-    for _, _, o, ax, side in cand:
-        band = (o[:, 2] - ax[:, 2] <= cfg.z_min) & (o[:, 2] + ax[:, 2] >= cfg.z_max)
+    for (_, _, o, ax, side), band in zip(cand, bands):
         d = c - o
         d[band, 2] = 0.0  # an elliptic cylinder: horizontal offsets
         lat = d @ side
@@ -132,19 +138,15 @@ class NMPC:
         self.N = cfg.horizon
         self._take = ncfg.stride * np.arange(1, self.N + 1) - 1  # the references' knots on the NMPC's grid
         self.buckets = _buckets(cfg)
-        self._problems: dict[int, tuple] = {}
-        for J in self.buckets:  # built now (some 50 ms each), not on a plan's time
-            self.problem(J)
+        # every bucket's problem built now (some 50 ms each), not on a plan's time
+        self._problems = {J: (J, *_build(cfg, ncfg, J)) for J in self.buckets}
         self.amax = np.array([cfg.a_max_xy, cfg.a_max_xy, cfg.a_max_z])
         self.vmax = np.array([cfg.v_max_xy, cfg.v_max_xy, cfg.v_max_z])
         self.reset()
 
     def problem(self, n: int):
         """(solver, parameter offsets, row offsets) of the smallest problem with rows for n moving obstacles."""
-        J = next(b for b in self.buckets if b >= min(n, self.cfg.max_dynamic))
-        if J not in self._problems:
-            self._problems[J] = (J, *_build(self.cfg, self.ncfg, J))
-        return self._problems[J]
+        return self._problems[next(b for b in self.buckets if b >= min(n, self.cfg.max_dynamic))]
 
     def reset(self) -> None:
         """Forget the previous solution: the next call starts from the guide or a straight line."""
@@ -158,12 +160,10 @@ class NMPC:
         """The planned positions' x, y bounds (2,) each from the geofence (the known walls): geofence_margin
         inside it, widened to what the drone cannot avoid from (p0, v0) (its braking path at a_max_xy per
         axis): inside the margin, no closer. Unbounded without a finite geofence."""
-        lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
-        if geofence is None:
-            return lo, hi
-        g_lo, g_hi = (np.asarray(x, dtype=float).reshape(-1)[:2] for x in geofence)
-        if not (np.all(np.isfinite(g_lo)) and np.all(np.isfinite(g_hi))):
-            return lo, hi
+        g = finite_geofence(geofence)
+        if g is None:
+            return np.full(2, -np.inf), np.full(2, np.inf)
+        g_lo, g_hi = g
         v = v0[:2]
         reach = p0[:2] + v * np.abs(v) / (2 * self.cfg.a_max_xy) + np.sign(v) * self.cfg.backoff
         r = self.cfg.geofence_margin
@@ -211,7 +211,8 @@ class NMPC:
         side = np.array([-fwd[1], fwd[0], 0.0])
         cand = dynamic_candidates(cfg, c, obs, side, (p_ref[-1] - p0) / (N * dt))
         J, solver, lay, rows = self.problem(len(cand))
-        pos0[1:] = _outside(pos0[1:] if not guided else guide, cand, cfg, 0.0 if guided else cfg.side_bias)
+        bands = [_spans_band(cfg, oc, ax) for _, _, oc, ax, _ in cand]
+        pos0[1:] = _outside(pos0[1:] if not guided else guide, cand, bands, 0.0 if guided else cfg.side_bias)
         P = np.zeros(lay["np"])
         P[0:3], P[3:6], P[6:9] = p0, v0, a0
         P[lay["pref"]:lay["vref"]] = p_ref.ravel()
@@ -220,9 +221,8 @@ class NMPC:
         lbg[:rows["dyn"]] = ubg[:rows["dyn"]] = 0.0  # the dynamics
         # moving obstacles: the nearest max_dynamic, exact
         o, ia, am, live = np.zeros((N, J, 3)), np.zeros((N, J, 3)), np.ones((N, J)), np.zeros((N, J), bool)
-        for j, (_, _, oc, ax, _) in enumerate(cand):
+        for j, ((_, _, oc, ax, _), band) in enumerate(zip(cand, bands)):
             o[:, j], ia[:, j], am[:, j], live[:, j] = oc, 1.0 / ax, ax.min(axis=1), True
-            band = (oc[:, 2] - ax[:, 2] <= cfg.z_min) & (oc[:, 2] + ax[:, 2] >= cfg.z_max)
             ia[band, j, 2] = 0.0  # spans the altitude band: its elliptic cylinder
             am[band, j] = ax[band, :2].min(axis=1)
         P[lay["o"]:lay["ia"]] = o.ravel()

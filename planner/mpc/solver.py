@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 import osqp
 
-from planner.fallback import brake_and_hold
+from planner.fallback import brake_and_hold, braking_1d
 from planner.mpc.config import MPCConfig
 from planner.mpc.qp import QPLayout, rollout
 from planner.mpc.rows import dynamic_candidates, dynamic_rows, finite_rows, static_rows
@@ -67,10 +67,16 @@ class MPCResult:
 def altitude_band(cfg: MPCConfig, p0, v0) -> tuple[np.ndarray, np.ndarray]:
     """(3)'s altitude bounds (N,) each on p_1..p_N: the band less the backoff, widened to the vertical
     braking path from a start outside it or heading out of it."""
-    N, dt = cfg.horizon, cfg.dt
-    vz = np.sign(v0[2]) * np.maximum(abs(v0[2]) - cfg.a_max_z * dt * np.arange(N + 1), 0.0)
-    zb = p0[2] + np.cumsum(0.5 * dt * (vz[:-1] + vz[1:]))
+    zb = braking_1d(p0[2], v0[2], cfg.a_max_z, cfg.dt, cfg.horizon)[0][1:]
     return np.minimum(cfg.z_min + cfg.backoff, zb), np.maximum(cfg.z_max - cfg.backoff, zb)
+
+
+def finite_geofence(geofence) -> tuple[np.ndarray, np.ndarray] | None:
+    """The geofence's (lo, hi) x, y (2,) each, or None when there is none or a bound is not finite."""
+    if geofence is None:
+        return None
+    lo, hi = (np.asarray(x, dtype=float).reshape(-1)[:2] for x in geofence)
+    return (lo, hi) if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) else None
 
 
 def brake_result(t0, p0, v0, amax, dt, horizon, why, tic, iters=0, ignored=0) -> MPCResult:
@@ -149,14 +155,12 @@ class MPC:
         l[3:6] = u[3:6] = v0
         rz = slice(6 * N + 3, 15 * N, 9)
         l[rz], u[rz] = altitude_band(cfg, p0, v0)
-        fence = None
-        if geofence is not None:
-            lo, hi = (np.asarray(x, dtype=float).reshape(-1)[:2] for x in geofence)
-            if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
-                req = cfg.geofence_margin
-                fence = (lo + req, hi - req)
-                l[qp.rg:qp.rg + 4 * N] = cfg.geofence_scale * np.tile(
-                    [lo[0] + req, req - hi[0], lo[1] + req, req - hi[1]], N)
+        fence, g = None, finite_geofence(geofence)
+        if g is not None:
+            lo, hi = g
+            req = cfg.geofence_margin
+            fence = (lo + req, hi - req)
+            l[qp.rg:qp.rg + 4 * N] = cfg.geofence_scale * np.tile([lo[0] + req, req - hi[0], lo[1] + req, req - hi[1]], N)
         return l, u, fence
 
     def _solve_qp(self, c, cand, p0, guided, q, l, u, Ax0, zw, yw):

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dodt.context import EpisodeContext, reset_with_context
-from planner.fallback import brake_and_hold, invalid_input_stop, valid_input
+from planner.fallback import brake_and_hold, braking_1d, invalid_input_stop, valid_input
 from planner.map.clearance import static_clearance
 from planner.map.distance import opencv_distance
 from planner.shield.candidates import Candidates, backups, roll, target_velocities
@@ -303,9 +303,7 @@ class PassiveSafetyShield:
         P, V, A = motion.P[k], motion.V[k], motion.A[k]
         n = A.shape[0]
         if still:
-            vz0 = float(inp.velocity[2])
-            vz = np.sign(vz0) * np.maximum(abs(vz0) - c.a_brake * c.dt * np.arange(n + 1), 0.0)
-            z = float(inp.position[2]) + np.r_[0.0, np.cumsum(0.5 * c.dt * (vz[:-1] + vz[1:]))]
+            z, vz = braking_1d(float(inp.position[2]), float(inp.velocity[2]), c.a_brake, c.dt, n)
         else:
             z = np.array([nominal.sample(inp.stamp + q * c.dt)[0][2] for q in range(n + 1)])
             vz = np.array([nominal.sample(inp.stamp + q * c.dt)[1][2] for q in range(n + 1)])

@@ -122,10 +122,12 @@ def test_bad_input_falls_back_and_identical_input_gives_identical_plans():
 
 def test_nmpc_is_a_built_in_planner():
     from experiments.plugins import PluginError
-    from experiments.registry import check_planner, make_planner, planner_label
+    from experiments.config_limits import PLANNER_NAMES
+    from experiments.registry import BUILTIN_PLANNERS, check_planner, make_planner, planner_label
     from planner.mpc.nmpc import NMPC as Solver
     from planner.nominal.navigator import MPCPlanner
 
+    assert tuple(BUILTIN_PLANNERS) == PLANNER_NAMES  # the command line's list, kept light of imports
     check_planner("nmpc")
     planner = make_planner("nmpc", 0.3)
     assert isinstance(planner.planner, MPCPlanner) and isinstance(planner.planner.mpc, Solver)
