@@ -1,13 +1,13 @@
 """The planner's time per plan on the inputs of closed-loop episodes (``dodt-nav bench planner``).
 
 An episode is flown once with a recorder around the default planner: every PlannerInput is kept, its
-voxel map reduced to the occupied set (all the planner reads of it) and its seen-space copied. The
-inputs are then replayed, in order, through a fresh default planner, ``repeats`` times, timing each
-``plan`` call alone: the figure is the planner's, not the loop's, and its inputs are those of a real
-flight. Each replay rebuilds the maps (untimed) as the loop had them: one map object while the loop's
-map did not change, a new one when it did, so the map's caches serve the planner as they did in the
-loop. The replayed plans must equal the recorded ones (the planner is deterministic); the count of
-those that do, in every replay, is printed beside the times.
+voxel map reduced to the occupied and the never-observed sets (all the planner reads of it) and its
+seen-space copied. The inputs are then replayed, in order, through a fresh default planner, ``repeats``
+times, timing each ``plan`` call alone: the figure is the planner's, not the loop's, and its inputs are
+those of a real flight. Each replay rebuilds the maps (untimed) as the loop had them: one map object
+while the loop's map did not change, a new one when it did, so the map's caches serve the planner as
+they did in the loop. The replayed plans must equal the recorded ones (the planner is deterministic);
+the count of those that do, in every replay, is printed beside the times.
 """
 from __future__ import annotations
 
@@ -32,6 +32,7 @@ from sim.vehicle import load_vehicle
 class _Snapshot:
     inp: PlannerInput  # occupancy None; the map is rebuilt from the fields below
     occupied: np.ndarray | None  # packbits of log_odds >= l_occ
+    unknown: np.ndarray | None  # packbits of the voxels never observed (log_odds at l_unknown)
     map_cfg: object
     map_version: int | None  # the loop's map version: equal versions share one rebuilt map
     plan: Trajectory | None  # None: the planner raised
@@ -51,6 +52,7 @@ class _Recorder:
         occ = inp.occupancy  # the input as the planner gets it, before the call (kept if the call raises)
         snap = _Snapshot(replace(inp, occupancy=None, seen=copy.deepcopy(inp.seen)),
                          None if occ is None else np.packbits(occ.log_odds >= occ.l_occ),
+                         None if occ is None else np.packbits(occ.log_odds <= occ.l_unknown),
                          None if occ is None else occ.cfg, None if occ is None else occ.version, None)
         self.snapshots.append(snap)
         out = self.planner.plan(inp)
@@ -64,6 +66,8 @@ class _Recorder:
 def _map(s: _Snapshot) -> VoxelMap:
     m = VoxelMap(s.map_cfg)
     m.set_known(np.unpackbits(s.occupied, count=m.log_odds.size).reshape(m.log_odds.shape).astype(bool))
+    m.log_odds[np.unpackbits(s.unknown, count=m.log_odds.size).reshape(m.log_odds.shape).astype(bool)] = m.l_unknown
+    m.version += 1
     return m
 
 

@@ -236,6 +236,7 @@ LIMITS: dict[str, Limit] = {
     "shield.w_way": _WEIGHT,
     "shield.way_look": _SPAN,
     "shield.hold_speed": _SPEED0,
+    "shield.unobserved_is_blocked": BOOL,
     "shield.hold_reanchor": _real(0.0, 10.0),  # m
     # ---- navigator (planner.nominal.navigator.NavigatorConfig)
     "navigator.cruise_speed": _SPEED,

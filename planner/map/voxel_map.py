@@ -15,7 +15,9 @@ trail. Ours: a voxel is left alone by both rules when it has been occupied for `
 or when it was occupied for ``protect_before`` updates already when a dynamic region first came over it
 (it stays so while regions keep covering it). The reference frees everything in the region, so a person
 walking past a shelf or a pillar erases its near face from the map, and then a drone flies into it; a
-walker's own voxels are as young as its box when the box first covers them.
+walker's own voxels are as young as its box when the box first covers them. Also ours: a region frees
+occupied voxels only (unknown ones stay unknown), and a depth point inside it counts as neither hit nor
+miss, so structure a person stands beside before it was ever seen stays unknown, not seen free.
 Voxel (i, j, k) covers origin + res * [i, i + 1) per axis. No result depends on the wall clock.
 """
 from __future__ import annotations
@@ -94,7 +96,8 @@ def _in_regions(i, j, k, regions):
 def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, rmax, res, dims, blo, bhi,
                 regions, stamp, hits, misses, touched, base, protected):
     """Ray-cast one frame, counting hits and misses per voxel (cv: camera in voxel units). A point inside
-    a dynamic region ends a free ray, unless its voxel is ``protected`` (VoxelMap._established).
+    a dynamic region, unless its voxel is ``protected`` (VoxelMap._established), counts as neither: the
+    voxels before it are seen free, its own is left as it was (a walker, or structure beside it).
 
     stamp[k] holds the id of the last ray bundle that crossed voxel k; ids grow across frames, so
     stamp[k] >= base means "counted this frame" and stamp[k] == bid "crossed by this bundle", where
@@ -140,8 +143,9 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                     j = min(max(int(math.floor(pv[1])), blo[1]), bhi[1])
                     k = min(max(int(math.floor(pv[2])), blo[2]), bhi[2])
                     idx = i * si + j * sj + k
+                    unseen = False  # an endpoint in a dynamic region: person or what is behind, not known
                     if not free and _in_regions(i, j, k, regions) and not protected[idx]:
-                        free = True
+                        free = unseen = True
                         skipped += 1
                     rays += 1
                     st = stamp[idx]
@@ -155,7 +159,7 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                     if st == bid:  # this bundle already walked from here to the camera
                         continue
                     stamp[idx] = bid
-                    if free:
+                    if free and not unseen:
                         misses[idx] = min(misses[idx] + 1, 32767)
                     # Amanatides & Woo toward the camera; per-axis step counts end it in the camera voxel
                     ri, rj, rk = abs(ci - i), abs(cj - j), abs(ck - k)
@@ -420,7 +424,8 @@ class VoxelMap:
         self._cover_box = self._regions_box_of(regions)
         protected = self._protection
         protected[box] = self._established(box)
-        self.log_odds[box][cover & ~protected[box]] = np.float32(self.l_min)
+        sub = self.log_odds[box]
+        sub[cover & ~protected[box] & (sub > self.l_unknown)] = np.float32(self.l_min)  # unknown stays unknown
         out = dict(rays=0, hits=0, skipped_in_dynamic=0, bad_pixels=0, stamp=stamp)
         for depth_m, intrinsics, T_world_camera in views:
             for k, v in self._cast_view(depth_m, intrinsics, T_world_camera, hist, protected).items():
@@ -584,6 +589,21 @@ class VoxelMap:
         if bits is None:
             bits = self._columns["bits"] = _column_bits(self.log_odds, self.l_occ)
         return bits
+
+    def column_unobserved(self, z_lo: float, z_hi: float) -> np.ndarray:
+        """(nx, ny) bool: a column is unobserved if no voxel overlapping the band [z_lo, z_hi] was ever
+        observed (free or occupied). Read-only and cached per map version, as column_blocked."""
+        k0 = max(int(np.floor((z_lo - self.origin[2]) / self.res)), 0)
+        k1 = min(int(np.floor((z_hi - self.origin[2]) / self.res)), int(self.dims[2]) - 1)
+        self._columns_current()
+        key = ("unobserved", k0, k1)
+        col = self._columns.get(key)
+        if col is None:
+            seen = float(self.l_unknown) + 0.5 * self.cfg.unknown_offset  # between unknown and float32(l_min)
+            col = ~_column_any(self.log_odds, seen, k0, k1) if k1 >= k0 else np.zeros(tuple(self.dims[:2]), bool)
+            col.flags.writeable = False
+            self._columns[key] = col
+        return col
 
     def column_blocked(self, z_lo: float, z_hi: float, inflate: bool = True) -> np.ndarray:
         """(nx, ny) bool: a column is blocked if a voxel overlapping the band [z_lo, z_hi] is occupied,

@@ -66,6 +66,8 @@ class ShieldConfig:
     way_look: float = 2.0
     hold_speed: float = 0.3  # m/s: stopping from slower than this holds a fixed point
     hold_reanchor: float = 0.3  # m: a hold point farther than this from the drone is set anew
+    unobserved_is_blocked: bool = True  # columns the map never observed at the flight altitude count as
+    # structure: the commitment keeps clear of space no sensor has looked at (the back of a box); ours
 
 
 class PassiveSafetyShield:
@@ -115,6 +117,8 @@ class PassiveSafetyShield:
         c, occ = self.cfg, inp.occupancy
         z = float(inp.goal[2])
         raw = occ.column_blocked(z - c.band, z + c.band, inflate=False)
+        if c.unobserved_is_blocked and hasattr(occ, "column_unobserved"):
+            raw = raw | occ.column_unobserved(z - c.band, z + c.band)
         fence = None if inp.geofence is None else tuple(np.r_[np.asarray(inp.geofence[0], float).ravel(),
                                                              np.asarray(inp.geofence[1], float).ravel()])
         key = (z, fence, occ.xy_origin.tobytes(), occ.cfg.resolution)  # and the grid itself, below

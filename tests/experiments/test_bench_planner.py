@@ -19,6 +19,6 @@ def test_a_changed_input_changes_the_replayed_plan():
     snaps, context = bench_planner.record("corridor", 0, perception="oracle", duration=2.0, static_map="depth")
     s = snaps[5]
     moved = bench_planner._Snapshot(replace(s.inp, goal=s.inp.goal + np.array([0.0, 1.0, 0.0])),
-                                    s.occupied, s.map_cfg, s.map_version, s.plan)
+                                    s.occupied, s.unknown, s.map_cfg, s.map_version, s.plan)
     out = bench_planner.replay(snaps[:5] + [moved], context, repeats=1)
     assert out["same"] == 5  # the comparison sees a different plan

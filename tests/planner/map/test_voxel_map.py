@@ -125,6 +125,24 @@ def test_a_walker_passing_a_long_seen_obstacle_does_not_erase_it():
     assert not np.any(_walk_past_static(15, seen_before=9, protect_before=0).is_occupied(face))
 
 
+def test_structure_beside_a_person_from_the_start_stays_unknown_until_seen():
+    """A walker stands by the static box's front face from the first frame, so the face inside the walker's
+    region was never seen: it stays unknown (neither occupied nor seen free, so the shield's unobserved rule
+    keeps the drone out of it) while the walker stands there, and is inserted once the walker has left."""
+    m = VoxelMap(SMALL)
+    c = np.array([3.08, 0.45, 0.85])  # beside the face, not hiding it: its region reaches y = 1.0
+    walker = (c - WALKER_SIZE / 2, c + WALKER_SIZE / 2)
+    face = _pts([3.58], [0.88, 0.93], [0.3, 0.6, 0.9])  # inside the walker's region (its box + 0.3 m)
+    for _ in range(10):
+        out = m.update(render_depth(K, T, [walker, STATIC, FAR_WALL]), K, T, dynamic_boxes=[(c, WALKER_SIZE)])
+    assert out["skipped_in_dynamic"] > 0
+    assert m.is_unknown(face).all()
+    assert m.is_occupied(_pts([3.58], [1.13], [0.3, 0.6, 0.9])).all()  # the face outside the region
+    for _ in range(m.cfg.dynamic_history + 5):  # the walker has gone
+        m.update(render_depth(K, T, [STATIC, FAR_WALL]), K, T)
+    assert m.is_occupied(face).all()
+
+
 def test_history_blocks_insertion_for_a_few_frames_only():
     box = (np.array([2.03, -0.27, 0.0]), np.array([2.43, 0.23, 1.5]))
     center, size = (box[0] + box[1]) / 2, box[1] - box[0]
@@ -354,6 +372,7 @@ def test_dynamic_regions_free_and_hold_voxels_as_the_whole_grid_rule_says(histor
     rng = np.random.default_rng(4)
     occupied = rng.random(m.log_odds.shape) < 0.2
     m.log_odds[occupied] = np.float32(m.l_max)
+    m.log_odds[~occupied & (rng.random(m.log_odds.shape) < 0.5)] = np.float32(m.l_min)  # seen free; the rest unknown
     m._since[...] = rng.integers(0, 12, m.log_odds.shape)
     m._updates = 10
     log_odds, held, covered = m.log_odds.copy(), np.zeros_like(occupied), np.zeros_like(occupied)
@@ -375,12 +394,13 @@ def test_dynamic_regions_free_and_hold_voxels_as_the_whole_grid_rule_says(histor
         held &= cover
         covered = cover
         established = (occ & (m._updates - m._since >= cfg.static_after)) | held
-        log_odds[cover & ~established] = np.float32(m.l_min)
+        log_odds[cover & ~established & (log_odds > m.l_unknown)] = np.float32(m.l_min)  # unknown stays unknown
         np.testing.assert_array_equal(m.log_odds, log_odds)
         np.testing.assert_array_equal(m._held, held)
         np.testing.assert_array_equal(m._covered, covered)
         assert not m._protection.any()
     assert np.any(held) and np.any(occupied & (log_odds == m.l_min))  # both rules were exercised
+    assert np.any(~occupied & (log_odds == m.l_unknown))  # unknown voxels under regions among them
 
 
 @pytest.mark.parametrize("height", [3.0, 6.4, 7.0])
