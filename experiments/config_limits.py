@@ -237,6 +237,7 @@ LIMITS: dict[str, Limit] = {
     "shield.way_look": _SPAN,
     "shield.hold_speed": _SPEED0,
     "shield.unobserved_is_blocked": BOOL,
+    "shield.unobserved_band": _real(0.0, 2.0),  # m
     "shield.hold_reanchor": _real(0.0, 10.0),  # m
     # ---- navigator (planner.nominal.navigator.NavigatorConfig)
     "navigator.cruise_speed": _SPEED,
@@ -342,6 +343,7 @@ LIMITS: dict[str, Limit] = {
     "map.unknown_offset": _real(0.0, 10.0),  # log-odds
     "map.depth_min": _real(0.0, 20.0),  # m
     "map.depth_max": _real(0.0, 50.0, lo_open=True),  # m
+    "map.hole_window": _whole(0, 64),  # px; 0: the reference's rule
     "map.raycast_max": _real(0.0, 50.0, lo_open=True),  # m
     "map.skip_pixel": _whole(1, 64),  # px
     "map.ray_bundle_px": _whole(0, 256),  # px; 0: the reference's rule

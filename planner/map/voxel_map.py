@@ -53,6 +53,10 @@ class MapConfig:
     unknown_offset: float = 0.01  # unknown = logit(p_min) - this, ref UNKNOWN_FLAG
     depth_min: float = 0.2  # m, closer pixels dropped, ref map yaml depth_min_value
     depth_max: float = 5.0  # m, farther pixels (and 0) become free rays, ref depth_max_value
+    # ours: a pixel without a return (0) that has returns within this many pixels is free only up to the
+    # nearest of them, less a voxel; 0: the reference (a free ray of raycast_max). A RealSense-like sensor
+    # leaves holes at depth edges, and a free ray of 5 m from one carves through the structure behind
+    hole_window: int = 2  # px
     raycast_max: float = 5.0  # m, longest ray; longer ones are shortened and end free, ref raycast_max_length
     skip_pixel: int = 2  # every n-th row and column, ref map yaml depth_skip_pixel
     # ours: a ray stops at a voxel crossed by an earlier ray of its own ray_bundle_px-square pixel block
@@ -74,9 +78,11 @@ class MapConfig:
         if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < 1 or not self.p_min < self.p_occ < self.p_max < 1:
             raise ValueError("MapConfig: need 0 < p_min < p_miss < 0.5 < p_hit < 1 and p_min < p_occ < p_max < 1")
         if self.skip_pixel < 1 or self.margin < 0 or self.dynamic_history < 1 or self.ray_bundle_px < 0 \
-                or self.ray_bundle_px % self.skip_pixel or self.static_after < 0 or self.protect_before < 0:
+                or self.ray_bundle_px % self.skip_pixel or self.static_after < 0 or self.protect_before < 0 \
+                or self.hole_window < 0:
             raise ValueError("MapConfig: need skip_pixel >= 1, margin >= 0, dynamic_history >= 1, "
-                             "static_after >= 0 and ray_bundle_px a non-negative multiple of skip_pixel")
+                             "static_after >= 0, hole_window >= 0 and ray_bundle_px a non-negative multiple of "
+                             "skip_pixel")
         cells = math.prod(max(round(x / self.resolution), 1) for x in self.size)
         if cells > MAX_MAP_CELLS:
             raise ValueError(f"MapConfig: size / resolution gives {cells:.3g} voxels, more than {MAX_MAP_CELLS:.0e} "
@@ -93,11 +99,26 @@ def _in_regions(i, j, k, regions):
 
 
 @njit(cache=True, nogil=True)
+def _nearest_return(depth, v, u, r):
+    """The least positive finite depth within r pixels of (v, u); inf when there is none."""
+    H, W = depth.shape
+    near = np.inf
+    for vv in range(max(v - r, 0), min(v + r + 1, H)):
+        for uu in range(max(u - r, 0), min(u + r + 1, W)):
+            d = depth[vv, uu]
+            if d > 0.0 and d < near:
+                near = d
+    return near
+
+
+@njit(cache=True, nogil=True)
 def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, rmax, res, dims, blo, bhi,
-                regions, stamp, hits, misses, touched, base, protected):
+                regions, stamp, hits, misses, touched, base, protected, hole):
     """Ray-cast one frame, counting hits and misses per voxel (cv: camera in voxel units). A point inside
     a dynamic region, unless its voxel is ``protected`` (VoxelMap._established), counts as neither: the
-    voxels before it are seen free, its own is left as it was (a walker, or structure beside it).
+    voxels before it are seen free, its own is left as it was (a walker, or structure beside it). A pixel
+    without a return is a free ray of raycast_max, or, with returns within ``hole`` pixels, a free ray up
+    to a voxel short of the nearest of them.
 
     stamp[k] holds the id of the last ray bundle that crossed voxel k; ids grow across frames, so
     stamp[k] >= base means "counted this frame" and stamp[k] == bid "crossed by this bundle", where
@@ -119,7 +140,10 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                         continue
                     free = d == 0.0 or d > dmax  # no return: a free ray of raycast_max (ref)
                     if free:
-                        d = rmax + 0.1
+                        near = _nearest_return(depth, v, u, hole) if d == 0.0 and hole > 0 else np.inf
+                        d = min(near - res, rmax + 0.1)  # a hole beside returns: free up to them (ours)
+                        if d < dmin:
+                            continue
                     elif d < dmin:
                         continue
                     xc, yc = (u - cx) * d / fx, (v - cy) * d / fy
@@ -457,7 +481,7 @@ class VoxelMap:
                             np.ascontiguousarray(T[:3, :3]), (cam - self.origin) / self.res, c.margin,
                             c.skip_pixel, bundle, c.depth_min, c.depth_max, c.raycast_max, self.res, self.dims,
                             blo, bhi, hist, self._stamp, self._hits, self._misses, self._touched,
-                            self._next_bundle, protected.reshape(-1))
+                            self._next_bundle, protected.reshape(-1), c.hole_window)
             self._next_bundle += int(r[1])
             _apply(self.log_odds.reshape(-1), self._touched, r[0], self._hits, self._misses, hist, self.dims,
                    self.l_hit, self.l_miss, self.l_min, self.l_max, self.l_occ, self._since.reshape(-1),
@@ -591,16 +615,17 @@ class VoxelMap:
         return bits
 
     def column_unobserved(self, z_lo: float, z_hi: float) -> np.ndarray:
-        """(nx, ny) bool: a column is unobserved if no voxel overlapping the band [z_lo, z_hi] was ever
-        observed (free or occupied). Read-only and cached per map version, as column_blocked."""
+        """(nx, ny) bool: a column is unobserved if a voxel overlapping the band [z_lo, z_hi] was never
+        observed (neither free nor occupied). Read-only and cached per map version, as column_blocked."""
         k0 = max(int(np.floor((z_lo - self.origin[2]) / self.res)), 0)
         k1 = min(int(np.floor((z_hi - self.origin[2]) / self.res)), int(self.dims[2]) - 1)
         self._columns_current()
         key = ("unobserved", k0, k1)
         col = self._columns.get(key)
         if col is None:
-            seen = float(self.l_unknown) + 0.5 * self.cfg.unknown_offset  # between unknown and float32(l_min)
-            col = ~_column_any(self.log_odds, seen, k0, k1) if k1 >= k0 else np.zeros(tuple(self.dims[:2]), bool)
+            seen = np.float32(float(self.l_unknown) + 0.5 * self.cfg.unknown_offset)  # between unknown and l_min
+            col = np.any(self.log_odds[:, :, k0:k1 + 1] < seen, axis=2) if k1 >= k0 else np.zeros(
+                tuple(self.dims[:2]), bool)
             col.flags.writeable = False
             self._columns[key] = col
         return col

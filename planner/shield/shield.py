@@ -66,8 +66,12 @@ class ShieldConfig:
     way_look: float = 2.0
     hold_speed: float = 0.3  # m/s: stopping from slower than this holds a fixed point
     hold_reanchor: float = 0.3  # m: a hold point farther than this from the drone is set anew
-    unobserved_is_blocked: bool = True  # columns the map never observed at the flight altitude count as
-    # structure: the commitment keeps clear of space no sensor has looked at (the back of a box); ours
+    # columns with a voxel the map never observed within unobserved_band of the flight altitude count as
+    # structure: the commitment keeps clear of space no sensor has looked at (the back of a box); ours. The
+    # band is the body's (0.12 m tall) and its altitude error, not the structure band: the camera cannot
+    # see the whole of that near the drone, and a box lower than its top is seen over
+    unobserved_is_blocked: bool = True
+    unobserved_band: float = 0.1  # m
 
 
 class PassiveSafetyShield:
@@ -118,7 +122,7 @@ class PassiveSafetyShield:
         z = float(inp.goal[2])
         raw = occ.column_blocked(z - c.band, z + c.band, inflate=False)
         if c.unobserved_is_blocked and hasattr(occ, "column_unobserved"):
-            raw = raw | occ.column_unobserved(z - c.band, z + c.band)
+            raw = raw | occ.column_unobserved(z - c.unobserved_band, z + c.unobserved_band)
         fence = None if inp.geofence is None else tuple(np.r_[np.asarray(inp.geofence[0], float).ravel(),
                                                              np.asarray(inp.geofence[1], float).ravel()])
         key = (z, fence, occ.xy_origin.tobytes(), occ.cfg.resolution)  # and the grid itself, below

@@ -195,16 +195,19 @@ def test_a_hold_is_at_rest_in_all_three_axes():
 
 
 def test_space_the_map_never_observed_counts_as_structure():
-    """A box whose front face was seen and whose back never was (unknown voxels behind the face, reaching
-    wider than the face): a plan whose commitment passes within the drone's radius of that unseen space, but
-    clear of the face, is not flown; with the rule off, it is. Moving away from unseen space stays allowed."""
+    """A box 1.4 m tall whose front face was seen and whose back never was (unknown voxels behind the face,
+    reaching wider than the face, up to the box's top; seen free over it): a plan whose commitment passes
+    within the drone's radius of that unseen space, but clear of the face, is not flown; with the rule off,
+    it is. Moving away from unseen space stays allowed."""
     m = _map()
     face = m.world_to_cell(np.array([[4.0, -0.5], [4.0, 0.5]]))
     back = m.world_to_cell(np.array([[4.1, -0.5], [5.5, 0.9]]))
-    m.log_odds[face[0, 0], face[0, 1]:face[1, 1] + 1, :] = m.l_max
-    m.log_odds[back[0, 0]:back[1, 0] + 1, back[0, 1]:back[1, 1] + 1, :] = m.l_unknown
+    top = int(np.floor((1.4 - m.origin[2]) / m.res))
+    m.log_odds[face[0, 0], face[0, 1]:face[1, 1] + 1, :top] = m.l_max
+    m.log_odds[back[0, 0]:back[1, 0] + 1, back[0, 1]:back[1, 1] + 1, :top] = m.l_unknown
     m.version += 1
-    assert np.all(m.column_unobserved(0.7, 1.7)[back[0, 0]:back[1, 0] + 1, back[0, 1]:back[1, 1] + 1])
+    unseen = m.column_unobserved(1.1, 1.3)[back[0, 0]:back[1, 0] + 1, back[0, 1]:back[1, 1] + 1]
+    assert np.all(unseen) and not np.any(m.column_unobserved(1.5, 1.7))  # over the box: seen
     inp = _input(0.0, (3.0, 1.25), (1.5, 0.0), occ=m)  # 0.75 m beside the face, 0.35 m beside the unseen space
     off = replace(CFG, unobserved_is_blocked=False)
     assert PassiveSafetyShield(Straight((1.5, 0.0)), off).plan(inp).status == "solved"
