@@ -116,7 +116,8 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                 regions, stamp, hits, misses, touched, base, protected, hole):
     """Ray-cast one frame, counting hits and misses per voxel (cv: camera in voxel units). A point inside
     a dynamic region, unless its voxel is ``protected`` (VoxelMap._established), counts as neither: the
-    voxels before it are seen free, its own is left as it was (a walker, or structure beside it). A pixel
+    voxels before the region are seen free, the region's are left as they were (a walker, or structure
+    beside it; depth noise puts points behind a face, and their rays would carve it). A pixel
     without a return is a free ray of raycast_max, or, with returns within ``hole`` pixels, a free ray up
     to a voxel short of the nearest of them.
 
@@ -221,6 +222,10 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                             touched[n] = idx
                             n += 1
                         stamp[idx] = bid
+                        if unseen:  # from a point in a dynamic region: its voxels are not seen free (ours)
+                            if _in_regions(idx // si, (idx // sj) % dims[1], idx % sj, regions):
+                                continue
+                            unseen = False
                         misses[idx] = min(misses[idx] + 1, 32767)
     return n, bid - base + 1, rays, nhit, skipped, bad
 
