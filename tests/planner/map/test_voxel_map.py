@@ -133,14 +133,38 @@ def test_structure_beside_a_person_from_the_start_stays_unknown_until_seen():
     c = np.array([3.08, 0.45, 0.85])  # beside the face, not hiding it: its region reaches y = 1.0
     walker = (c - WALKER_SIZE / 2, c + WALKER_SIZE / 2)
     face = _pts([3.58], [0.88, 0.93], [0.3, 0.6, 0.9])  # inside the walker's region (its box + 0.3 m)
-    for _ in range(10):
-        out = m.update(render_depth(K, T, [walker, STATIC, FAR_WALL]), K, T, dynamic_boxes=[(c, WALKER_SIZE)])
+    rng = np.random.default_rng(0)
+    for _ in range(10):  # with depth noise: points behind the face, whose rays cross it, are in the region too
+        d = render_depth(K, T, [walker, STATIC, FAR_WALL])
+        d = np.where(d > 0, d + rng.normal(0.0, 0.03, d.shape), 0.0).astype(np.float32)
+        out = m.update(d, K, T, dynamic_boxes=[(c, WALKER_SIZE)])
     assert out["skipped_in_dynamic"] > 0
     assert m.is_unknown(face).all()
     assert m.is_occupied(_pts([3.58], [1.13], [0.3, 0.6, 0.9])).all()  # the face outside the region
     for _ in range(m.cfg.dynamic_history + 5):  # the walker has gone
         m.update(render_depth(K, T, [STATIC, FAR_WALL]), K, T)
     assert m.is_occupied(face).all()
+
+
+@pytest.mark.parametrize("window", [0, 2])
+def test_a_hole_beside_returns_is_free_only_up_to_them(window):
+    """Pixels without a return (0) in the middle of the wall's image: with map.hole_window they carve free
+    space only up to a voxel short of the wall, and what lies behind the wall stays unknown; with 0 (the
+    reference) each is a free ray of raycast_max through the wall."""
+    m = VoxelMap(MapConfig(origin=SMALL.origin, size=SMALL.size, hole_window=window))
+    d = render_depth(K, T, [WALL])
+    holes = [(240, 320), (200, 300), (280, 360)]  # even pixels: sampled with skip_pixel 2
+    for v, u in holes:
+        d[v, u] = 0.0
+    for _ in range(5):
+        m.update(d, K, T)
+    behind = []
+    for v, u in holes:
+        ray = T[:3, :3] @ np.array([(u - K.cx) / K.fx, (v - K.cy) / K.fy, 1.0])
+        ray /= np.linalg.norm(ray)
+        behind.append(T[:3, 3] + ray * (3.6 - T[0, 3]) / ray[0])  # 0.27 m behind the wall's back
+    assert m.is_occupied(_pts([3.08], [-0.5, 0.0, 0.5], [1.0, 1.2, 1.4])).all()  # the wall itself either way
+    assert m.is_unknown(behind).all() if window else m.is_free(behind).all()
 
 
 def test_history_blocks_insertion_for_a_few_frames_only():
