@@ -29,6 +29,11 @@ a pair counting only within ``match_distance`` (0.5 m).
   The person's place is read at the first frame at or after that time (none within ``max_lag``: the pair
   is not scored; nor when the person has left the ground truth);
 - id switches: a person matched by a different track id than the last time it was matched;
+- time to moving (``moving_latency_*``): for each stretch in which a walking person is visible within
+  ``table_range`` (the recall's test; a stretch ends after ``stretch_gap`` s not visible), the time from
+  its first visible frame to the first in which a dynamic track is matched to the person (0 when one
+  already is); the median and 90th percentile over stretches, and how many stretches saw no such report
+  (``moving_latency_unreported``). DODT's own dynamic label, not the closed loop's moving-track rule;
 - speed of static tracks: the reported horizontal speed of every track labelled static, in every
   frame (``static_speed_p95``), and of every track, whatever its label, lying farther than
   ``still_distance`` (1 m) from every person (``still_speed_p95``): what a planner that reads every
@@ -189,6 +194,10 @@ class PerceptionMetrics:
     life: TrackLife = field(default_factory=TrackLife)
     # recall of the people all round the sensors (a rig's), not only of those in the first camera's view
     all_round: bool = False
+    stretch_gap: float = 0.5  # s a person may go unseen within one stretch of the time to moving
+    stretches: dict = field(default_factory=dict)  # person id -> [first visible, last visible, reported]
+    moving_latency: list = field(default_factory=list)  # s, one per stretch reported moving
+    unreported: int = 0  # closed stretches without a dynamic report
 
     def _score_predictions(self, stamp: float, people: dict) -> None:
         """Scores the predictions due by ``stamp`` against ``people`` ({id: (2,) xy})."""
@@ -277,7 +286,22 @@ class PerceptionMetrics:
             if dist <= 5.0:
                 self.visible_people += 1
                 self.recalled_people += p.id in matched_people
+            if dist <= self.table_range:
+                self._stretch(float(truth.stamp), p.id, p.id in matched_people)
         self.series.append((truth.stamp, float(np.mean(fe)) if fe else np.nan, float(np.mean(fv)) if fv else np.nan))
+
+    def _stretch(self, stamp: float, pid, reported: bool) -> None:
+        """The time to moving's bookkeeping for a person visible at ``stamp``."""
+        st = self.stretches.get(pid)
+        if st is not None and stamp - st[1] > self.stretch_gap:  # a new stretch: the last one ended
+            self.unreported += not st[2]
+            st = None
+        if st is None:
+            st = self.stretches[pid] = [stamp, stamp, False]
+        st[1] = stamp
+        if reported and not st[2]:
+            st[2] = True
+            self.moving_latency.append(stamp - st[0])
 
     def summary(self) -> dict:
         def mean(x):
@@ -302,6 +326,12 @@ class PerceptionMetrics:
                 "std_scale": (float(np.median(self.std_ratio)) / MEDIAN_PER_SIGMA if self.std_ratio
                               else float("nan")),
                 "pred_err_cv": mean(self.pred_cv), "pred_err_ca": mean(self.pred_ca), "predicted": len(self.pred_cv),
+                "moving_latency_median": (float(np.median(self.moving_latency)) if self.moving_latency
+                                          else float("nan")),
+                "moving_latency_p90": (float(np.percentile(self.moving_latency, 90)) if self.moving_latency
+                                       else float("nan")),
+                "moving_latency_n": len(self.moving_latency),
+                "moving_latency_unreported": self.unreported + sum(not st[2] for st in self.stretches.values()),
                 **self.life.summary()}
 
     @staticmethod
@@ -318,6 +348,8 @@ class PerceptionMetrics:
             m.vel_err_beyond += p.vel_err_beyond
             m.static_speeds += p.static_speeds
             m.still_speeds += p.still_speeds
+            m.moving_latency += p.moving_latency
+            m.unreported += p.unreported + sum(not st[2] for st in p.stretches.values())
             for k in ("dynamic_reports", "false_dynamic", "duplicates", "visible_people", "recalled_people",
                       "id_switches", "frames"):
                 setattr(m, k, getattr(m, k) + getattr(p, k))
