@@ -16,7 +16,7 @@ or when it was occupied for ``protect_before`` updates already when a dynamic re
 (it stays so while regions keep covering it). The reference frees everything in the region, so a person
 walking past a shelf or a pillar erases its near face from the map, and then a drone flies into it; a
 walker's own voxels are as young as its box when the box first covers them. Also ours: a region frees
-occupied voxels only (unknown ones stay unknown), and a depth point inside it counts as neither hit nor
+observed voxels only (unknown ones stay unknown), and a depth point inside it counts as neither hit nor
 miss, so structure a person stands beside before it was ever seen stays unknown, not seen free.
 Voxel (i, j, k) covers origin + res * [i, i + 1) per axis. No result depends on the wall clock.
 """
@@ -77,6 +77,9 @@ class MapConfig:
             raise ValueError("MapConfig: resolution, size and local_update_range must be positive")
         if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < 1 or not self.p_min < self.p_occ < self.p_max < 1:
             raise ValueError("MapConfig: need 0 < p_min < p_miss < 0.5 < p_hit < 1 and p_min < p_occ < p_max < 1")
+        if not self.unknown_offset >= 1e-4:
+            raise ValueError(f"MapConfig: unknown_offset must be >= 1e-4 (unknown and free voxels must differ), "
+                             f"got {self.unknown_offset}")
         if self.skip_pixel < 1 or self.margin < 0 or self.dynamic_history < 1 or self.ray_bundle_px < 0 \
                 or self.ray_bundle_px % self.skip_pixel or self.static_after < 0 or self.protect_before < 0 \
                 or self.hole_window < 0:
@@ -621,7 +624,8 @@ class VoxelMap:
 
     def column_unobserved(self, z_lo: float, z_hi: float) -> np.ndarray:
         """(nx, ny) bool: a column is unobserved if a voxel overlapping the band [z_lo, z_hi] was never
-        observed (neither free nor occupied). Read-only and cached per map version, as column_blocked."""
+        observed (neither free nor occupied); a band wholly outside the map's height: none is, as
+        column_blocked finds none blocked. Read-only and cached per map version, as column_blocked."""
         k0 = max(int(np.floor((z_lo - self.origin[2]) / self.res)), 0)
         k1 = min(int(np.floor((z_hi - self.origin[2]) / self.res)), int(self.dims[2]) - 1)
         self._columns_current()

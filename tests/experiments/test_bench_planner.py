@@ -12,6 +12,10 @@ def test_replayed_plans_equal_the_closed_loops():
     assert len({s.map_version for s in snaps}) > 5  # the map changed under the planner
     out = bench_planner.replay(snaps, context, repeats=2)
     assert out["same"] == out["n"] == 2 * len(snaps)  # deterministic, and the snapshot holds all it reads
+    m = bench_planner._map(snaps[-1])  # the rebuilt map keeps what was never observed (the shield reads it)
+    unknown = m.log_odds <= m.l_unknown
+    assert np.array_equal(np.packbits(unknown), snaps[-1].unknown) and 0 < np.count_nonzero(unknown) < unknown.size
+    assert np.array_equal(np.packbits(m.log_odds >= m.l_occ), snaps[-1].occupied)
     assert out["ms"].shape == (2, len(snaps)) and np.all(out["ms"] > 0)
 
 

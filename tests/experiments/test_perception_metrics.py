@@ -104,8 +104,8 @@ def test_prediction_error_skips_a_person_who_has_left_or_a_frame_too_late():
 
 def test_time_to_moving_per_stretch_in_view():
     """Person 1 is reported moving 0.3 s after coming into view, leaves the view for 1 s and, back, is reported
-    after 0.2 s; person 2 is reported from its first frame; person 3 never is; a standing person does not
-    count."""
+    after 0.2 s; person 2 is reported from its first frame; person 3 never is, in either of its two stretches
+    (the first closed by its absence, the second open at the end); a standing person does not count."""
     m = PerceptionMetrics()
     for k in range(13):  # 30 Hz: t = 0 .. 0.4 s
         t = k / 30.0
@@ -116,12 +116,12 @@ def test_time_to_moving_per_stretch_in_view():
     for k in range(10):  # t = 1.4 .. 1.7 s: person 1 back in view, reported from t = 1.6
         t = 1.4 + k / 30.0
         tracks = [_track(11, 2.0, 0.1, 1.0)] if t >= 1.6 - 1e-9 else []
-        result, truth = _frame([_person(1, 2.0, 0.0)], tracks)
+        result, truth = _frame([_person(1, 2.0, 0.0), _person(3, 4.0, -1.0)], tracks)
         m.add(result, SimpleNamespace(**{**vars(truth), "stamp": t}), K)
     assert sorted(m.moving_latency) == pytest.approx([0.0, 0.2, 0.3])
     s = m.summary()
     assert s["moving_latency_n"] == 3 and s["moving_latency_median"] == pytest.approx(0.2)
-    assert s["moving_latency_unreported"] == 1  # person 3
+    assert s["moving_latency_unreported"] == 2  # person 3, twice
     both = PerceptionMetrics.combine([m, m])
-    assert both["moving_latency_n"] == 6 and both["moving_latency_unreported"] == 2
+    assert both["moving_latency_n"] == 6 and both["moving_latency_unreported"] == 4
     assert np.isnan(PerceptionMetrics().summary()["moving_latency_median"])
