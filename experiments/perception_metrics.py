@@ -303,6 +303,10 @@ class PerceptionMetrics:
             st[2] = True
             self.moving_latency.append(stamp - st[0])
 
+    def _all_unreported(self) -> int:
+        """Stretches without a dynamic report: the closed ones and those still open."""
+        return self.unreported + sum(not st[2] for st in self.stretches.values())
+
     def summary(self) -> dict:
         def mean(x):
             return float(np.mean(x)) if x else float("nan")
@@ -331,7 +335,7 @@ class PerceptionMetrics:
                 "moving_latency_p90": (float(np.percentile(self.moving_latency, 90)) if self.moving_latency
                                        else float("nan")),
                 "moving_latency_n": len(self.moving_latency),
-                "moving_latency_unreported": self.unreported + sum(not st[2] for st in self.stretches.values()),
+                "moving_latency_unreported": self._all_unreported(),
                 **self.life.summary()}
 
     @staticmethod
@@ -349,7 +353,7 @@ class PerceptionMetrics:
             m.static_speeds += p.static_speeds
             m.still_speeds += p.still_speeds
             m.moving_latency += p.moving_latency
-            m.unreported += p.unreported + sum(not st[2] for st in p.stretches.values())
+            m.unreported += p._all_unreported()
             for k in ("dynamic_reports", "false_dynamic", "duplicates", "visible_people", "recalled_people",
                       "id_switches", "frames"):
                 setattr(m, k, getattr(m, k) + getattr(p, k))

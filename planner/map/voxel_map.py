@@ -626,18 +626,23 @@ class VoxelMap:
         """(nx, ny) bool: a column is unobserved if a voxel overlapping the band [z_lo, z_hi] was never
         observed (neither free nor occupied); a band wholly outside the map's height: none is, as
         column_blocked finds none blocked. Read-only and cached per map version, as column_blocked."""
-        k0 = max(int(np.floor((z_lo - self.origin[2]) / self.res)), 0)
-        k1 = min(int(np.floor((z_hi - self.origin[2]) / self.res)), int(self.dims[2]) - 1)
+        k0, k1 = self._band(z_lo, z_hi)
         self._columns_current()
         key = ("unobserved", k0, k1)
         col = self._columns.get(key)
-        if col is None:
-            seen = np.float32(float(self.l_unknown) + 0.5 * self.cfg.unknown_offset)  # between unknown and l_min
-            col = np.any(self.log_odds[:, :, k0:k1 + 1] < seen, axis=2) if k1 >= k0 else np.zeros(
+        if col is None:  # unknown voxels hold l_unknown exactly; observed ones float32(l_min) or more
+            col = np.any(self.log_odds[:, :, k0:k1 + 1] <= self.l_unknown, axis=2) if k1 >= k0 else np.zeros(
                 tuple(self.dims[:2]), bool)
             col.flags.writeable = False
             self._columns[key] = col
         return col
+
+    def _band(self, z_lo: float, z_hi: float, grow: int = 0) -> tuple[int, int]:
+        """The voxel layers k0..k1 (inclusive) overlapping [z_lo, z_hi], grown by ``grow`` layers each way and
+        clipped to the map (k1 < k0: none)."""
+        k0 = int(np.floor((z_lo - self.origin[2]) / self.res)) - grow
+        k1 = int(np.floor((z_hi - self.origin[2]) / self.res)) + grow
+        return max(k0, 0), min(k1, int(self.dims[2]) - 1)
 
     def column_blocked(self, z_lo: float, z_hi: float, inflate: bool = True) -> np.ndarray:
         """(nx, ny) bool: a column is blocked if a voxel overlapping the band [z_lo, z_hi] is occupied,
@@ -645,9 +650,7 @@ class VoxelMap:
         Read-only: the result is shared by every caller until the map changes (copy it to edit; writing it
         raises). Code that writes ``log_odds`` itself must bump ``version`` after."""
         r = self.inflation if inflate else np.zeros(3, np.int64)
-        k0 = int(np.floor((z_lo - self.origin[2]) / self.res)) - r[2]
-        k1 = int(np.floor((z_hi - self.origin[2]) / self.res)) + r[2]
-        k0, k1 = max(k0, 0), min(k1, self.dims[2] - 1)
+        k0, k1 = self._band(z_lo, z_hi, int(r[2]))
         self._columns_current()
         key = (k0, k1, bool(inflate))
         col = self._columns.get(key)
