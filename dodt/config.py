@@ -242,6 +242,44 @@ class IdentificationConfig:
 
 
 @dataclass(frozen=True)
+class MotionConfig:
+    """The motion label (dodt.motion_label, ours): which tracks the point voting leaves static are
+    reported dynamic all the same, as tall boxes tracked at walking speed. Point voting is weakest for a
+    person walking straight at the camera (the surface moves along the rays, so nearest-neighbour
+    matches fall short of the vote threshold): such a person can be tracked at the right velocity yet
+    labelled static. A track labelled dynamic once (by either route) stays so below ``min_speed``: a
+    walker slowing down to turn or stop loses the vote and the speed, not the chance that it walks on."""
+
+    enabled: bool = True
+    min_speed: float = 0.5  # m/s, filtered horizontal speed ...
+    max_speed: float = 2.5  # m/s ... up to a run (faster: a box jumping between wall fragments)
+    height: tuple[float, float] = (1.0, 2.3)  # m, box height of a standing person
+    max_footprint: float = 1.2  # m, longest horizontal side: not a wall seen end-on
+    min_age: float = 0.2  # s, a track this old at least
+    # A measured box lying this much (share of its footprint) on structure the static map has held for a
+    # second or more (DODT.set_scene; none without a map) is a static obstacle's edge, not a person: that
+    # track is never labelled dynamic by motion again
+    on_structure: float = 0.2
+    # m: a box whose bottom is this close above the lowest height the camera sees at the box is taken to
+    # be cut by the image's lower edge (dodt.motion_label.person_tall)
+    bottom_edge_tolerance: float = 0.15
+
+    def __post_init__(self):
+        lo, hi = self.height
+        if not 0.0 <= self.min_speed <= self.max_speed:
+            raise ValueError(f"motion: need 0 <= min_speed <= max_speed, got {self.min_speed} and {self.max_speed}")
+        if not 0.0 <= lo <= hi:
+            raise ValueError(f"motion: height must be [low, high] with 0 <= low <= high, got {[lo, hi]}")
+        if not self.max_footprint > 0.0:
+            raise ValueError(f"motion: max_footprint must be > 0, got {self.max_footprint}")
+        if not self.min_age >= 0.0 or not self.bottom_edge_tolerance >= 0.0:
+            raise ValueError(f"motion: min_age and bottom_edge_tolerance must be >= 0, got {self.min_age} and "
+                             f"{self.bottom_edge_tolerance}")
+        if not 0.0 <= self.on_structure <= 1.0:
+            raise ValueError(f"motion: on_structure is a share of the footprint, 0 to 1, got {self.on_structure}")
+
+
+@dataclass(frozen=True)
 class LearnedConfig:
     """The optional learned person detector, YOLO-MAD (paper Sec. III-B; ref sections 4-5).
 
@@ -401,6 +439,7 @@ class DODTConfig:
     kalman: KalmanConfig = field(default_factory=KalmanConfig)
     track: TrackConfig = field(default_factory=TrackConfig)
     identification: IdentificationConfig = field(default_factory=IdentificationConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
     learned: LearnedConfig = field(default_factory=LearnedConfig)
     lidar: LidarDetectorConfig = field(default_factory=LidarDetectorConfig)
     # Hz: the frame rate the per-frame constants (KalmanConfig's Q, TrackConfig.size_smoothing) are

@@ -4,7 +4,8 @@
     result = perception.process(frame)   # dodt.frames.SensorFrame
     for ob in result.dynamic: ...
 
-Detectors -> ensemble -> association -> Kalman filter -> identification, each timed. Input
+Detectors -> ensemble -> association -> Kalman filter -> identification (point voting, then the
+motion label of dodt.motion_label: one label, ``dynamic``, whose ``evidence`` says which), each timed. Input
 is checked: a wrong shape or dtype, intrinsics that do not match the image, a depth scale that is
 not a positive number or a pose whose rotation is a reflection raise a ValueError naming the
 problem; bad data is skipped and counted instead (NaN / inf / negative depth pixels are invalid
@@ -38,6 +39,7 @@ from dodt.ensemble import ensemble
 from dodt.frames import SensorFrame
 from dodt.geometry import box_cut_by_view_side, complete_hidden_depth, points_in_box
 from dodt.lidar_detector import LidarDetector
+from dodt.motion_label import MotionLabel
 from dodt.pointcloud import VoxelCloud
 from dodt.result import PerceptionResult
 from dodt.tracker import Tracker
@@ -127,6 +129,7 @@ class DODT:
             learned_detector = YoloMAD(self.cfg.learned)
         self.learned_detector = learned_detector
         self.tracker = Tracker(self.cfg)
+        self.motion = MotionLabel(self.cfg.motion)  # the last step of identification
         self.lidar = LidarDetector(self.cfg.lidar, self.cfg.voxel.ground_height, self.cfg.voxel.ceiling_height)
         self._scan = None  # the latest LiDAR scan not yet fused (observe_lidar)
         self._others: tuple = ()  # the rig's other cameras' frames for the next frame (observe_cameras)
@@ -145,6 +148,7 @@ class DODT:
 
     def reset(self) -> None:
         self.tracker.reset()
+        self.motion.reset()
         self._scan = None
         self._others = ()
         self.lidar_clouds.clear()
@@ -180,8 +184,10 @@ class DODT:
     def set_scene(self, static_map=None, geofence=None, lidar_elevation_min: float | None = None) -> None:
         """What the LiDAR detector knows of the scene (dodt.lidar_detector): the static map
         (a dodt.context.StaticMapView), the geofence ((x, y) low, (x, y) high; its sides are walls),
-        the LiDAR's lowest ray's elevation [rad]."""
+        the LiDAR's lowest ray's elevation [rad]. The motion label checks its tracks against the static
+        map's long-held structure (``established_fraction``; dodt.motion_label)."""
         self._lidar_view = (static_map, geofence, lidar_elevation_min)
+        self.motion.structure_test = getattr(static_map, "established_fraction", None)
 
     def observe_lidar(self, scan) -> None:
         """Keep a LiDAR scan (dodt.frames.LidarScan) for the next frame: its boxes join that frame's
@@ -275,7 +281,7 @@ class DODT:
     def _skip(self, frame: SensorFrame, why: str, bad_pixels: int = 0) -> PerceptionResult:
         self.counters[why] += 1
         stamp = self.last_stamp if self.last_stamp is not None else 0.0
-        return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),
+        return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=self.motion((t.output(stamp) for t in self.tracker.tracks), frame),
                                 timings_ms={m: 0.0 for m in MODULES} | {"total": 0.0}, skipped=why,
                                 bad_pixels=bad_pixels)
 
@@ -324,6 +330,7 @@ class DODT:
         dt = 0.0 if self.last_stamp is None else stamp - self.last_stamp
         if dt > max(self.cfg.depth.max_frame_gap, self.cfg.track.coast_time):
             self.tracker.reset()  # frames were lost for longer than tracks survive: start again
+            self.motion.reset()
             self.counters["restarted_after_gap"] += 1
             dt = 0.0
         if dt > 0:
@@ -368,6 +375,7 @@ class DODT:
         for tr in self.tracker.tracks:
             tr.identify(seq, self.poses, self.clouds.get, frame.intrinsics, self.cfg.depth.depth_max, self.lidar_clouds,
                         {k: (v[0], v[1].get, v[2]) for k, v in self.other_views.items()})
+        obstacles = self.motion((t.output(stamp) for t in self.tracker.tracks), frame)
         t3 = time.perf_counter()
         timings = {"point_cloud": t_cloud, **debug["timings"], "other_cameras": t_other, "lidar": t_lidar,
                    "association": (t1 - t0) * 1e3,
@@ -376,5 +384,5 @@ class DODT:
         debug["lidar"], debug["other_cameras"] = lidar_dets, other_dets
         boxes = {k: [(d.center.copy(), d.size.copy()) for d in debug[k]]
                  for k in ("udepth", "dbscan", "learned", "ensemble", "other_cameras", "lidar")}
-        return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=tuple(t.output(stamp) for t in self.tracker.tracks),
+        return PerceptionResult(stamp=stamp, seq=frame.seq, obstacles=obstacles,
                                 timings_ms=timings, detections=boxes, bad_pixels=n_bad)

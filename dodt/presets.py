@@ -18,17 +18,21 @@ published numbers.
   velocity filter, velocity threshold (after Wang et al., Method II).
 - method-3-udepth-velocity: U-depth detector, centre-distance association, constant-velocity
   filter, velocity threshold with consistency over frames (after Xu et al. 2022, Method III).
+
+The DODT presets end identification with the motion label (dodt.motion_label); the baselines, other
+methods, do not.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
 from dodt.config import (AssociationConfig, DODTConfig, EnsembleConfig, IdentificationConfig, KalmanConfig,
-                         LearnedConfig, TrackConfig)
+                         LearnedConfig, MotionConfig, TrackConfig)
 
 _CENTER_CV = dict(association=AssociationConfig(method="center"), kalman=KalmanConfig(model="cv"))
 _VELOCITY_ONLY = IdentificationConfig(method="velocity", consistency_span=0.0, force_dynamic_span=None)
 _NO_COAST = TrackConfig(coast_time=0.0)
+_NO_MOTION = MotionConfig(enabled=False)
 
 PRESETS: dict[str, DODTConfig] = {
     "dodt": DODTConfig(name="dodt"),
@@ -37,12 +41,13 @@ PRESETS: dict[str, DODTConfig] = {
     "dodt-no-fat": DODTConfig(name="dodt-no-fat", **_CENTER_CV),
     "dodt-no-coast": DODTConfig(name="dodt-no-coast", track=_NO_COAST),
     "method-1-umap": DODTConfig(name="method-1-umap", ensemble=EnsembleConfig(detectors=("udepth",)),
-                                identification=_VELOCITY_ONLY, track=_NO_COAST, **_CENTER_CV),
+                                identification=_VELOCITY_ONLY, track=_NO_COAST, motion=_NO_MOTION, **_CENTER_CV),
     "method-2-cluster": DODTConfig(name="method-2-cluster", ensemble=EnsembleConfig(detectors=("dbscan",)),
-                                   identification=_VELOCITY_ONLY, track=_NO_COAST, **_CENTER_CV),
+                                   identification=_VELOCITY_ONLY, track=_NO_COAST, motion=_NO_MOTION, **_CENTER_CV),
     "method-3-udepth-velocity": DODTConfig(
         name="method-3-udepth-velocity", ensemble=EnsembleConfig(detectors=("udepth",)),
-        identification=replace(_VELOCITY_ONLY, consistency_span=2 / 30), track=_NO_COAST, **_CENTER_CV),
+        identification=replace(_VELOCITY_ONLY, consistency_span=2 / 30), track=_NO_COAST, motion=_NO_MOTION,
+        **_CENTER_CV),
 }
 
 

@@ -25,6 +25,10 @@ class TrackedObstacle:
     # static track still); None: as ``velocity``, ``acceleration``
     filter_velocity: np.ndarray | None = None
     filter_acceleration: np.ndarray | None = None
+    # what labelled it dynamic: "voting" (speed and point voting, paper Sec. III-D), "person" (the learned
+    # detector's label), "motion" (neither: a tall box tracked at walking speed, dodt.motion_label);
+    # "" when static
+    evidence: str = ""
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,7 +1,7 @@
 """Configuration from TOML files and the command line: ``--config FILE.toml`` and ``--set key=value``.
 
 Generic: it knows no section. The sections (``episode``, ``shield``, ``navigator``, ``map``, ``dodt``,
-``moving_rule``, ``oracle``, and ``planner`` / ``perception`` for a plug-in that declares a
+``oracle``, and ``planner`` / ``perception`` for a plug-in that declares a
 configuration dataclass) and the dataclass each one overrides are wired in experiments.registry, which
 passes them here as ``{name: default configuration}``.
 

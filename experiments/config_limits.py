@@ -460,6 +460,15 @@ LIMITS: dict[str, Limit] = {
     "dodt.identification.constrain_size": BOOL,
     "dodt.identification.target_size": _triple(0.0, 10.0, lo_open=True),  # m
     "dodt.identification.target_size_tolerance": _real(0.0, 10.0),  # m
+    # ---- dodt.motion (dodt.config.MotionConfig)
+    "dodt.motion.enabled": BOOL,
+    "dodt.motion.min_speed": _SPEED0,
+    "dodt.motion.max_speed": _SPEED0,
+    "dodt.motion.height": _pair(0.0, 10.0),  # m, box height
+    "dodt.motion.max_footprint": _real(0.0, 50.0, lo_open=True),  # m
+    "dodt.motion.min_age": _HISTORY,
+    "dodt.motion.on_structure": _FRACTION,
+    "dodt.motion.bottom_edge_tolerance": _real(0.0, 10.0),  # m
     "dodt.learned.enabled": BOOL,
     "dodt.learned.model": ANY_STRING,  # a path; "": the shipped model
     "dodt.learned.layout": _one_of(*LEARNED_LAYOUTS),
@@ -502,14 +511,6 @@ LIMITS: dict[str, Limit] = {
     "dodt.learned.unseen_after": _HISTORY,  # s; 0: never
     "dodt.learned.unseen_iou": _FRACTION,
     "dodt.learned.unseen_occluder_fraction": _FRACTION,
-    # ---- moving_rule (experiments.perception_modes.MovingTrackRule)
-    "moving_rule.min_speed": _SPEED0,
-    "moving_rule.max_speed": _SPEED0,
-    "moving_rule.height": _pair(0.0, 10.0),  # m, box height
-    "moving_rule.max_footprint": _real(0.0, 50.0, lo_open=True),  # m
-    "moving_rule.min_age": _HISTORY,
-    "moving_rule.on_structure": _FRACTION,
-    "moving_rule.bottom_edge_tolerance": _real(0.0, 10.0),  # m
     # ---- oracle (experiments.perception_modes.OracleConfig)
     "oracle.max_range": _real(0.0, 100.0, lo_open=True),  # m
     "oracle.half_view": _real(0.0, 180.0, lo_open=True, optional=True),  # deg

@@ -33,7 +33,7 @@ a pair counting only within ``match_distance`` (0.5 m).
   ``table_range`` (the recall's test; a stretch ends after ``stretch_gap`` s not visible), the time from
   its first visible frame to the first in which a dynamic track is matched to the person (0 when one
   already is); the median and 90th percentile over stretches, and how many stretches saw no such report
-  (``moving_latency_unreported``). DODT's own dynamic label, not the closed loop's moving-track rule;
+  (``moving_latency_unreported``). DODT's dynamic label, the one the closed loop avoids;
 - speed of static tracks: the reported horizontal speed of every track labelled static, in every
   frame (``static_speed_p95``), and of every track, whatever its label, lying farther than
   ``still_distance`` (1 m) from every person (``still_speed_p95``): what a planner that reads every

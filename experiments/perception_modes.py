@@ -73,66 +73,14 @@ def oracle_view(cam: np.ndarray, heading: float, half_fov: float, obstacle, max_
 PERSON_CLEAR_SPEED = 0.4  # m/s: a person-labelled track frees the map only when moving this fast
 
 
-@dataclass(frozen=True)
-class MovingTrackRule:
-    """Which tracks the planner avoids as moving obstacles besides those DODT labels dynamic (the DODT
-    modes; configuration section ``moving_rule``).
-
-    DODT's label decides what the map clears; it takes k + consistency frames to rise and its point
-    voting is weakest for a person walking straight at the camera (the surface moves along the
-    rays, so nearest-neighbour matches fall short of the vote threshold): a person can be tracked at
-    the right velocity but labelled static. A planner should not ignore a tall object tracked moving at
-    walking speed, so such tracks also reach it (with their prediction), though the map is not cleared
-    for them. A track passed once (labelled dynamic, or by this rule) stays passed below min_speed: a
-    walker slowing down to turn or stop loses DODT's label and its walking speed, not the chance that
-    it walks on into the drone's way.
-    """
-
-    min_speed: float = 0.5  # m/s, filtered horizontal speed ...
-    max_speed: float = 2.5  # m/s ... up to a run (faster: a box jumping between wall fragments)
-    height: tuple[float, float] = (1.0, 2.3)  # m, box height of a standing person
-    max_footprint: float = 1.2  # m, longest horizontal side: not a wall seen end-on
-    min_age: float = 0.2  # s, a track this old at least
-    # A measured box lying this much (share of its footprint) on structure the map has held for a second
-    # or more is a static obstacle's edge, not a person: that track is never passed again
-    on_structure: float = 0.2
-    # m: a box whose bottom is this close above the lowest height the camera sees at the box is taken to
-    # be cut by the image's lower edge (DODTPerception._person_tall)
-    bottom_edge_tolerance: float = 0.15
-
-    def __post_init__(self):
-        lo, hi = self.height
-        if not 0.0 <= self.min_speed <= self.max_speed:
-            raise ValueError(f"MovingTrackRule: need 0 <= min_speed <= max_speed, got {self.min_speed} and "
-                             f"{self.max_speed}")
-        if not 0.0 <= lo <= hi:
-            raise ValueError(f"MovingTrackRule: height must be [low, high] with 0 <= low <= high, got {[lo, hi]}")
-        if not self.max_footprint > 0.0:
-            raise ValueError(f"MovingTrackRule: max_footprint must be > 0, got {self.max_footprint}")
-        if not self.min_age >= 0.0 or not self.bottom_edge_tolerance >= 0.0:
-            raise ValueError(f"MovingTrackRule: min_age and bottom_edge_tolerance must be >= 0, got {self.min_age} "
-                             f"and {self.bottom_edge_tolerance}")
-        if not 0.0 <= self.on_structure <= 1.0:
-            raise ValueError(f"MovingTrackRule: on_structure is a share of the footprint, 0 to 1, got "
-                             f"{self.on_structure}")
-
-
 class DODTPerception:
     uses_ground_truth = False
     uses_images = True
 
-    def __init__(self, config_name: str = "dodt", learned_detector=None, moving_rule: MovingTrackRule | None = MovingTrackRule(),
-                 config: DODTConfig | None = None):
+    def __init__(self, config_name: str = "dodt", learned_detector=None, config: DODTConfig | None = None):
         self.name = config_name
         # config: DODT's configuration (default: the preset of that name), e.g. with --set dodt.* applied
         self.dodt = DODT(preset(config_name) if config is None else config, learned_detector=learned_detector)
-        self.moving_rule = moving_rule
-        # the static map's established_fraction when the episode context has a map: a track the rule
-        # would pass is then checked against the static map (MovingTrackRule.on_structure)
-        self.structure_test = None
-        self._on_structure: set[int] = set()
-        # tracks passed to the planner, labelled dynamic or by the rule: passed again however slow they become
-        self._passed: set[int] = set()
 
     @property
     def uses_color(self) -> bool:
@@ -143,54 +91,9 @@ class DODTPerception:
         self.dodt.reset()
         smap = None if context is None else context.static_map
         lidar = next((s for s in context.sensors if isinstance(s, LidarSensor)), None) if context else None
+        # the map lets DODT's motion label tell a static obstacle's edge from a person (dodt.motion_label)
         self.dodt.set_scene(smap, None if context is None else context.geofence,
                             None if lidar is None else lidar.model.elevation_min)
-        self.structure_test = None if smap is None else smap.established_fraction
-        self._on_structure = set()
-        self._passed = set()
-
-    def _moving(self, o, frame: SensorFrame | None = None) -> bool:
-        m = self.moving_rule
-        if m is None or o.age < m.min_age or not self._person_tall(o, frame):
-            return False
-        v = o.velocity if o.filter_velocity is None else o.filter_velocity  # a static track reports none
-        speed = float(np.hypot(v[0], v[1]))
-        fast_enough = m.min_speed <= speed or o.id in self._passed  # a walker slowing to turn or stop is one still
-        if not (max(o.size[0], o.size[1]) <= m.max_footprint and fast_enough and speed <= m.max_speed):
-            return False
-        if o.id in self._on_structure:
-            return False
-        if self.structure_test is not None and not o.coasting and self.structure_test(o.center, o.size) >= m.on_structure:
-            self._on_structure.add(o.id)
-            return False
-        self._passed.add(o.id)
-        return True
-
-    def _person_tall(self, o, frame: SensorFrame | None) -> bool:
-        """The rule's height test, for a box cut by the image's lower edge too.
-
-        Near the camera a person's box is only what the vertical field of view shows: at 1 m a camera
-        1.2 m up sees down to 0.57 m, so the box of a person there is about 1.1 m tall, at 0.7 m 0.9 m,
-        short of the plain height test. A box that reaches down to the lowest height the camera sees at
-        its near side (``frame``'s pose and intrinsics) is taken to reach the floor: it passes when its
-        top is at least the rule's minimum height.
-        """
-        lo, hi = self.moving_rule.height
-        h = float(o.size[2])
-        if h > hi:
-            return False
-        if h >= lo:
-            return True
-        if frame is None:
-            return False
-        bottom, top = float(o.center[2]) - h / 2, float(o.center[2]) + h / 2
-        T, K = np.asarray(frame.T_world_camera, dtype=float), frame.intrinsics
-        q = T[:3, :3].T @ (np.array([o.center[0], o.center[1], bottom]) - T[:3, 3])  # optical: x right, y down
-        near = q[2] - 0.5 * float(np.hypot(o.size[0], o.size[1]))  # depth of the box's near side
-        if near <= 0.05:
-            return False  # beside or behind the camera: nothing to tell from the image
-        lowest = T[:3, :3] @ np.array([q[0] * near / q[2], (K.height - 1 - K.cy) * near / K.fy, near]) + T[:3, 3]
-        return bottom <= lowest[2] + self.moving_rule.bottom_edge_tolerance and top >= lo
 
     def observe_lidar(self, scan) -> None:
         self.dodt.observe_lidar(scan)
@@ -202,11 +105,8 @@ class DODTPerception:
         r = self.dodt.process(frame)
         preds, boxes = [], []
         for o in r.obstacles:
-            if o.dynamic:
-                self._passed.add(o.id)
-            elif not self._moving(o, frame):
+            if not o.dynamic:
                 continue
-            # the filter's velocity: a track the moving rule passes may be labelled static (zero velocity)
             v = o.velocity if o.filter_velocity is None else o.filter_velocity
             a = o.acceleration if o.filter_acceleration is None else o.filter_acceleration
             # The filter's position std is not passed (the prediction's own default growth is): DODT's
@@ -214,11 +114,11 @@ class DODTPerception:
             # the planner, which adds the std to a person's radius, then backs away from walkers it could
             # pass (docs/planner.md, "Where it stands").
             preds.append(ObstaclePrediction(id=o.id, center=o.center, size=o.size, velocity=v, acceleration=a))
-            # The map is freed under DODT's dynamic tracks; under a track dynamic only by the learned
-            # detector's person label, only while it moves: a misplaced person box lifted onto a
-            # wall would otherwise open a hole in the wall (ours; dodt without the module has no
-            # such tracks, so its behaviour is unchanged).
-            if o.dynamic and (not o.is_person or float(np.hypot(o.velocity[0], o.velocity[1])) >= PERSON_CLEAR_SPEED):
+            # The map is freed under DODT's dynamic tracks, but not under one dynamic by its motion alone
+            # (dodt.motion_label), which the map keeps as structure while it is there; under one the learned
+            # detector labels a person, only while it moves: a misplaced person box lifted onto a wall
+            # would otherwise open a hole in the wall.
+            if o.evidence != "motion" and (not o.is_person or float(np.hypot(o.velocity[0], o.velocity[1])) >= PERSON_CLEAR_SPEED):
                 boxes.append((o.center, o.size))
         return PerceptionOutput(stamp=r.stamp, obstacles=tuple(preds), clear_boxes=tuple(boxes),
                                 tracks=tuple(TrackReport.from_tracked(o) for o in r.obstacles),

@@ -3,7 +3,7 @@ planners, built-in or plug-in.
 
 - **Sections** (experiments.config is generic; this names them): ``episode`` (EpisodeConfig), ``shield``
   and ``navigator`` (the default planner's), ``map`` (the static map's, after the episode sizes it to the
-  scenario), ``dodt`` (on top of a DODT mode's preset), ``moving_rule`` (the DODT modes'), ``oracle`` (the
+  scenario), ``dodt`` (on top of a DODT mode's preset), ``oracle`` (the
   oracle modes', on top of each mode's own), and ``planner`` / ``perception`` for a plug-in class that
   declares a configuration dataclass as its ``config_class`` (built then as ``Class(config)``).
   Values are checked against experiments.config_limits for the built-in sections and against a plug-in
@@ -22,7 +22,7 @@ from experiments import config_limits
 from dodt.config import DODTConfig
 from experiments.config import Settings, build
 from experiments.episode_config import EpisodeConfig
-from experiments.perception_modes import (MODES, NOISY_ORACLE_VELOCITY_NOISE, DODTPerception, MovingTrackRule,
+from experiments.perception_modes import (MODES, NOISY_ORACLE_VELOCITY_NOISE, DODTPerception,
                                           OracleConfig, OraclePerception, StaticOnlyPerception)
 from experiments.plugins import PluginError, config_class, is_spec, load_plugin
 from planner.map.voxel_map import MapConfig
@@ -48,7 +48,7 @@ CHECKED_MAP = MapConfig(origin=(-0.5, -2.5, -0.1), size=(17.0, 5.0, 3.2))
 def builtin_sections() -> dict[str, Any]:
     """The built-in sections and their default configurations (the dodt section's: the dodt preset)."""
     return {"episode": EpisodeConfig(), "shield": ShieldConfig(), "navigator": NavigatorConfig(),
-            "map": CHECKED_MAP, "dodt": preset("dodt"), "moving_rule": MovingTrackRule(), "oracle": OracleConfig()}
+            "map": CHECKED_MAP, "dodt": preset("dodt"), "oracle": OracleConfig()}
 
 
 def known_modes() -> tuple[str, ...]:
@@ -78,7 +78,8 @@ def settings_for(config_file=None, sets=(), perception: str = "dodt", planner: s
     """Settings from ``--config`` and ``--set``, every key and value checked now (ConfigError; PluginError
     for a plug-in spec that does not load)."""
     sections = sections_for(perception, planner)
-    absent = {}
+    # sections that moved: where their keys live now
+    absent = {"moving_rule": "the moving-track rule is DODT's motion label now: set dodt.motion.<field>"}
     for name, spec in (("planner", planner), ("perception", perception)):
         if name not in sections:
             who = f"the {name} plug-in {spec}" if is_spec(spec) else f"the built-in {name} {spec!r}"
@@ -122,7 +123,7 @@ def check_perception(spec: str) -> None:
 
 def make_perception(spec: str, settings: Settings = Settings(), learned_detector=None):
     """A perception module by name or ``module:Class``, each section of ``settings`` on top of the mode's
-    own configuration: ``dodt`` and ``moving_rule`` for the DODT modes, ``oracle`` for the oracle modes,
+    own configuration: ``dodt`` for the DODT modes, ``oracle`` for the oracle modes,
     ``perception`` for a plug-in with a configuration class; static-only reads none."""
     if is_spec(spec):
         return load_plugin(spec, PERCEPTION_METHODS, "perception", "dodt.protocol.PerceptionModule",
@@ -133,21 +134,17 @@ def make_perception(spec: str, settings: Settings = Settings(), learned_detector
     if spec == "static-only":
         return StaticOnlyPerception()
     if spec in PRESETS:
-        return DODTPerception(spec, learned_detector=learned_detector,
-                              moving_rule=configured(settings, "moving_rule", MovingTrackRule()),
-                              config=configured(settings, "dodt", preset(spec)))
+        return DODTPerception(spec, learned_detector=learned_detector, config=configured(settings, "dodt", preset(spec)))
     raise PluginError(f"unknown perception mode {spec!r}; known: {', '.join(known_modes())}")
 
 
 def perception_sections(perception) -> dict:
     """The configuration a perception module runs with, by section: ``dodt`` for a module holding a DODT,
-    ``moving_rule`` for the DODT modes, ``oracle`` for the oracle modes (a plug-in's own: plugin_sections)."""
+    ``oracle`` for the oracle modes (a plug-in's own: plugin_sections)."""
     out = {}
     cfg = getattr(getattr(perception, "dodt", None), "cfg", None)
     if isinstance(cfg, DODTConfig):
         out["dodt"] = cfg
-    if isinstance(perception, DODTPerception):
-        out["moving_rule"] = perception.moving_rule
     if isinstance(perception, OraclePerception):
         out["oracle"] = perception.cfg
     return out

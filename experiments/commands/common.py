@@ -226,7 +226,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
                         help="fly a plug-in --planner behind the passive-safety shield (the default planner is)")
     parser.add_argument("--config", default=None, metavar="FILE.toml",
                         help="configuration overrides: TOML tables episode, shield, navigator (navigator.mpc, "
-                             "navigator.maneuvers), map, dodt, moving_rule, oracle, and planner / perception for a "
+                             "navigator.maneuvers), map, dodt (dodt.motion: the motion label), oracle, and planner / perception for a "
                              "plug-in with a config_class (experiments.registry)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="one override, the value a TOML literal (e.g. shield.a_brake=3.0, "

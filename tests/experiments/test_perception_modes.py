@@ -79,113 +79,26 @@ def test_oracle_modes_are_known_and_need_the_truth():
         make_perception("oracle-360").update(FRAME, None)
 
 
-def _track(coasting, speed=0.8, dynamic=False, size=(0.5, 0.5, 1.7)):
-    from dodt.result import TrackedObstacle
-    return TrackedObstacle(id=7, center=np.array([3.0, 0.0, 0.85]), size=np.array(size),
-                           velocity=np.array([speed, 0.0, 0.0]), acceleration=np.zeros(3), dynamic=dynamic,
-                           coasting=coasting, age=1.0, history=np.zeros((0, 4)))
-
-
-def _rule_only(rule):
-    from experiments.perception_modes import DODTPerception
-    p = DODTPerception.__new__(DODTPerception)  # the rule only: no DODT pipeline needed
-    p.moving_rule, p.structure_test, p._on_structure, p._passed = rule, None, set(), set()
-    return p
-
-
-def test_moving_track_rule_passes_person_like_tracks_at_walking_speed():
-    """A person-sized track at walking speed reaches the planner though DODT labels it static (coasting
-    too); a wall-sized or slow one does not."""
-    from experiments.perception_modes import MovingTrackRule
-    p = _rule_only(MovingTrackRule())
-    assert p._moving(_track(coasting=False)) and p._moving(_track(coasting=True))
-    assert not _rule_only(MovingTrackRule())._moving(_track(coasting=False, speed=0.2))  # never seen walking
-    assert not p._moving(_track(coasting=False, size=(2.5, 0.3, 1.7)))
-
-
-def test_moving_track_rule_keeps_a_walker_that_slows_down():
-    """A track passed once stays passed when it slows below min_speed (a walker slowing to turn or stop);
-    one never passed does not reach the planner slow; the other tests still apply to both."""
-    from experiments.perception_modes import MovingTrackRule
-    p = _rule_only(MovingTrackRule())
-    assert not p._moving(_track(coasting=False, speed=0.1))  # never seen walking
-    assert p._moving(_track(coasting=False, speed=1.0))
-    assert p._moving(_track(coasting=False, speed=0.1)) and p._moving(_track(coasting=False, speed=0.0))
-    assert not p._moving(_track(coasting=False, speed=0.1, size=(2.5, 0.3, 1.7)))  # not a person's footprint
-    assert not p._moving(_track(coasting=False, speed=3.0))  # faster than anyone walks
-
-
-def test_a_dynamic_track_that_slows_down_still_reaches_the_planner():
-    """A walker DODT labelled dynamic, then static as it slows to 0.2 m/s: still reported, with the filter's
-    velocity; the map is cleared only under the dynamic label."""
+def test_dodt_mode_passes_dodts_dynamic_tracks_and_clears_the_map_under_voted_ones_only():
+    """The loop avoids every track DODT labels dynamic, with the filter's velocity; the map is freed under a
+    voted one, not under one dynamic by its motion alone, nor under a slow learned person box."""
     from dodt.result import PerceptionResult, TrackedObstacle
-    from experiments.perception_modes import MovingTrackRule
-    p = _rule_only(MovingTrackRule())
+    from experiments.perception_modes import DODTPerception
 
-    def frame(dynamic, speed):
+    def track(i, dynamic, evidence, speed=1.0, person=False):
         v = np.array([speed, 0.0, 0.0])
-        o = TrackedObstacle(id=4, center=np.array([3.0, 0.0, 0.85]), size=np.array([0.5, 0.5, 1.7]),
-                            velocity=v if dynamic else np.zeros(3), acceleration=np.zeros(3), dynamic=dynamic,
-                            coasting=False, age=2.0, history=np.zeros((0, 4)), filter_velocity=v)
-        p.dodt = SimpleNamespace(process=lambda f: PerceptionResult(stamp=0.0, seq=0, obstacles=(o,), timings_ms={}))
-        return p.update(None)
+        return TrackedObstacle(id=i, center=np.array([3.0, float(i), 0.85]), size=np.array([0.5, 0.5, 1.7]),
+                               velocity=v, acceleration=np.zeros(3), dynamic=dynamic, coasting=False, age=2.0,
+                               history=np.zeros((0, 4)), is_person=person, filter_velocity=v, evidence=evidence)
 
-    first = frame(True, 1.0)
-    assert [o.id for o in first.obstacles] == [4] and len(first.clear_boxes) == 1
-    slow = frame(False, 0.2)
-    assert [o.id for o in slow.obstacles] == [4] and slow.clear_boxes == ()
-    assert slow.obstacles[0].velocity[0] == pytest.approx(0.2)
-    p._passed.clear()  # never seen walking: a slow static track stays in the map only
-    assert frame(False, 0.2).obstacles == ()
-
-
-def test_moving_track_rule_drops_a_track_once_seen_on_long_held_structure():
-    from experiments.perception_modes import MovingTrackRule
-    p = _rule_only(MovingTrackRule(on_structure=0.2))
-    share = {"v": 0.0}
-    p.structure_test = lambda c, s: share["v"]
-    assert p._moving(_track(coasting=False))
-    share["v"] = 0.5  # measured on a static obstacle's edge: dropped, and for good
-    assert not p._moving(_track(coasting=False))
-    share["v"] = 0.0
-    assert not p._moving(_track(coasting=True)) and not p._moving(_track(coasting=False))
-
-
-def _camera_frame():
-    """The camera of _truth (at (0, 0, 1.2), looking along +x) as a frame's pose and intrinsics."""
-    return SimpleNamespace(T_world_camera=_truth(0.0, []).T_world_camera, intrinsics=CameraIntrinsics())
-
-
-def _cut_person(distance, bottom_raise=0.0):
-    """A track on a person whose near side is `distance` ahead of the camera, its box from the lowest
-    height in view there (plus bottom_raise) up to 1.65 m."""
-    from dodt.result import TrackedObstacle
-    k = CameraIntrinsics()
-    low = max(1.2 - distance * (k.height - 1 - k.cy) / k.fy, 0.0) + bottom_raise
-    return TrackedObstacle(id=8, center=np.array([distance + 0.15, 0.0, (low + 1.65) / 2]),
-                           size=np.array([0.3, 0.5, 1.65 - low]), velocity=np.array([-0.9, 0.0, 0.0]),
-                           acceleration=np.zeros(3), dynamic=False, coasting=False, age=1.0, history=np.zeros((0, 4)))
-
-
-@pytest.mark.parametrize("distance", [0.6, 0.7, 0.8])
-def test_moving_track_rule_passes_a_near_person_cut_by_the_image_bottom(distance):
-    """Within a metre the camera sees a person from 0.6-0.8 m up only: the box is under the rule's 1 m but
-    reaches the image's lower edge, so it is a person's (without the frame it fails the plain test). A box
-    of the same top whose bottom is 0.3 m above that edge is not."""
-    from experiments.perception_modes import MovingTrackRule
-    p, frame = _rule_only(MovingTrackRule()), _camera_frame()
-    track = _cut_person(distance)
-    assert track.size[2] < MovingTrackRule().height[0]
-    assert p._moving(track, frame) and not p._moving(track)
-    assert not p._moving(_cut_person(distance, bottom_raise=0.3), frame)
-
-
-def test_moving_track_rule_height_test_is_unchanged_for_whole_boxes():
-    from experiments.perception_modes import MovingTrackRule
-    p, frame = _rule_only(MovingTrackRule()), _camera_frame()
-    assert p._moving(_track(coasting=False), frame)  # 1.7 m tall, 3 m ahead
-    assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 0.6)), frame)  # a short box 3 m ahead, floor in view
-    assert not p._moving(_track(coasting=False, size=(0.5, 0.5, 2.6)), frame)  # taller than a person
+    tracks = (track(1, True, "voting"), track(2, True, "motion", 0.2), track(3, False, ""),
+              track(4, True, "person", 0.2, person=True), track(5, True, "person", 1.0, person=True))
+    p = DODTPerception("dodt")
+    p.dodt = SimpleNamespace(process=lambda f: PerceptionResult(stamp=0.0, seq=0, obstacles=tracks, timings_ms={}))
+    out = p.update(None)
+    assert [o.id for o in out.obstacles] == [1, 2, 4, 5]
+    assert out.obstacles[1].velocity[0] == pytest.approx(0.2)
+    assert [float(c[1]) for c, _ in out.clear_boxes] == [1.0, 5.0]
 
 
 def test_oracle_acceleration_is_the_change_of_the_true_velocity():

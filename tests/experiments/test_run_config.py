@@ -39,12 +39,13 @@ def test_sections_apply_to_their_configurations():
 
 
 def test_perception_sections_apply_on_top_of_each_modes_own():
-    from experiments.perception_modes import NOISY_ORACLE_VELOCITY_NOISE, MovingTrackRule, OracleConfig
+    from dodt.config import MotionConfig
+    from experiments.perception_modes import NOISY_ORACLE_VELOCITY_NOISE, OracleConfig
 
-    s = build(None, ["moving_rule.min_speed=0.7", "moving_rule.height=[0.9, 2.4]", "oracle.max_range=8",
+    s = build(None, ["dodt.motion.min_speed=0.7", "dodt.motion.height=[0.9, 2.4]", "oracle.max_range=8",
                      "oracle.accel_window=none"])
-    assert make_perception("dodt", settings=s).moving_rule == MovingTrackRule(min_speed=0.7, height=(0.9, 2.4))
-    assert make_perception("dodt-no-coast", settings=s).moving_rule.min_speed == 0.7
+    assert make_perception("dodt", settings=s).dodt.cfg.motion == MotionConfig(min_speed=0.7, height=(0.9, 2.4))
+    assert make_perception("dodt-no-coast", settings=s).dodt.cfg.motion.min_speed == 0.7
     oracle, noisy, around = (make_perception(m, settings=s) for m in ("oracle", "oracle-noisy", "oracle-360"))
     assert oracle.cfg == OracleConfig(max_range=8.0, accel_window=None) and oracle.name == "oracle"
     assert noisy.cfg.velocity_noise == NOISY_ORACLE_VELOCITY_NOISE and noisy.cfg.max_range == 8.0
@@ -52,19 +53,19 @@ def test_perception_sections_apply_on_top_of_each_modes_own():
     quiet = build(None, ["oracle.velocity_noise=0.1"])
     assert make_perception("oracle-noisy", settings=quiet).cfg.velocity_noise == 0.1
     # nothing leaks into the modes' own configurations
-    assert make_perception("oracle").cfg == OracleConfig() and make_perception("dodt").moving_rule == MovingTrackRule()
+    assert make_perception("oracle").cfg == OracleConfig() and make_perception("dodt").dodt.cfg.motion == MotionConfig()
     assert make_perception("oracle-noisy").cfg == OracleConfig(velocity_noise=NOISY_ORACLE_VELOCITY_NOISE)
 
 
-@pytest.mark.parametrize("sets", [["moving_rule.min_speed=3.0", "moving_rule.max_speed=4.0"],
-                                  ["moving_rule.max_speed=4.0", "moving_rule.min_speed=3.0"]])
+@pytest.mark.parametrize("sets", [["dodt.motion.min_speed=3.0", "dodt.motion.max_speed=4.0"],
+                                  ["dodt.motion.max_speed=4.0", "dodt.motion.min_speed=3.0"]])
 def test_values_checked_together_can_be_set_in_any_order(sets):
-    from experiments.perception_modes import MovingTrackRule
+    from dodt.presets import preset
 
-    rule = configured(build(None, sets), "moving_rule", MovingTrackRule())
+    rule = configured(build(None, sets), "dodt", preset("dodt")).motion
     assert (rule.min_speed, rule.max_speed) == (3.0, 4.0)
-    with pytest.raises(ConfigError, match=r"^moving_rule.min_speed, moving_rule.max_speed: MovingTrackRule: need"):
-        build(None, ["moving_rule.min_speed=3.0", "moving_rule.max_speed=2.0"])
+    with pytest.raises(ConfigError, match=r"^dodt.motion.min_speed, dodt.motion.max_speed: motion: need"):
+        build(None, ["dodt.motion.min_speed=3.0", "dodt.motion.max_speed=2.0"])
 
 
 @pytest.mark.parametrize("sets, fragment", [
@@ -80,11 +81,12 @@ def test_values_checked_together_can_be_set_in_any_order(sets):
     (["map.p_hit=2.0"], "map.p_hit: 2.0 is not a number in (0.5, 1)"),
     (["shield.a_brake"], "expected section.key=value"),
     (["navigator.mpc.horizon=30", "navigator.mpc=3"], "a key is a value or a section, not both"),
-    (["moving_rule.nope=1"], "moving_rule.nope: unknown key; MovingTrackRule has no field 'nope'"),
-    (["moving_rule.min_speed=3.0"], "moving_rule.min_speed: MovingTrackRule: need 0 <= min_speed <= max_speed"),
-    (["moving_rule.height=[2.0, 1.0]"], "moving_rule.height: [2.0, 1.0] is not in increasing order"),
-    (["moving_rule.height=1.5"], "moving_rule.height: expected a list"),
-    (["moving_rule.on_structure=2"], "moving_rule.on_structure: 2.0 is not a number in [0, 1]"),
+    (["dodt.motion.nope=1"], "dodt.motion.nope: unknown key; MotionConfig has no field 'nope'"),
+    (["dodt.motion.min_speed=3.0"], "dodt.motion.min_speed: motion: need 0 <= min_speed <= max_speed"),
+    (["dodt.motion.height=[2.0, 1.0]"], "dodt.motion.height: [2.0, 1.0] is not in increasing order"),
+    (["dodt.motion.height=1.5"], "dodt.motion.height: expected a list"),
+    (["dodt.motion.on_structure=2"], "dodt.motion.on_structure: 2.0 is not a number in [0, 1]"),
+    (["moving_rule.min_speed=0.7"], "moving_rule.min_speed: the moving-track rule is DODT's motion label now"),
     (["oracle.max_range=0"], "oracle.max_range: 0.0 is not a number in (0, 100]"),
     (["oracle.noise_seed=1.5"], "oracle.noise_seed: expected a whole number, got 1.5"),
     (["oracle.all_around=true"], "oracle.all_around: unknown key; OracleConfig has no field 'all_around'"),
@@ -114,8 +116,8 @@ def test_bad_files_are_one_line_errors(tmp_path, capsys, text, fragment):
     ("[shield]\nnope = 1\n", [], "shield.nope: unknown key; ShieldConfig has no field 'nope'"),
     ("[planner]\nx = 1\n", [], "planner.x: the built-in planner 'default' declares no configuration"),
     ("[dodt.kalman]\nq_pos = 'abc'\n", [], "dodt.kalman.q_pos: expected a number"),
-    ("[moving_rule]\nmin_speed = 3.0\n", ["moving_rule.max_speed=2.0"],
-     "moving_rule.min_speed, moving_rule.max_speed: MovingTrackRule: need 0 <= min_speed <= max_speed"),
+    ("[dodt.motion]\nmin_speed = 3.0\n", ["dodt.motion.max_speed=2.0"],
+     "dodt.motion.min_speed, dodt.motion.max_speed: motion: need 0 <= min_speed <= max_speed"),
     ("[episode]\nframe_latency = -1\n", [], "episode.frame_latency: -1 is not"),
 ], ids=["type", "unknown key", "unknown section", "dodt value", "checked together", "section"])
 def test_an_error_in_the_config_file_starts_with_its_path(tmp_path, capsys, text, sets, message):
@@ -158,20 +160,19 @@ def test_run_records_the_effective_configuration(tmp_path):
     rc = main(["run", "corridor", "--seed", "0", "--perception", "oracle", "--out", str(out), "--set",
                "episode.static_map=truth", "--set", "episode.duration=1.5", "--set", "shield.a_brake=3.0",
                "--set", "navigator.mpc.horizon=20", "--set", "map.p_hit=0.75", "--set", "oracle.max_range=6",
-               "--set", "moving_rule.min_speed=0.6"])
+               "--set", "dodt.motion.min_speed=0.6"])
     assert rc == 0
     s = json.loads((out / "summary.json").read_text())
     c = s["config"]
     assert c["set"] == {"episode.static_map": "truth", "episode.duration": 1.5, "shield.a_brake": 3.0,
                         "navigator.mpc.horizon": 20, "map.p_hit": 0.75, "oracle.max_range": 6,
-                        "moving_rule.min_speed": 0.6}
+                        "dodt.motion.min_speed": 0.6}
     assert c["oracle"] == {"max_range": 6.0, "half_view": None, "memory": 1.0, "confirm_time": 0.0,
                            "accel_window": 0.1, "velocity_noise": 0.0, "noise_time": 0.5, "noise_seed": 0}
-    assert "moving_rule" not in c  # set, but the oracle does not use it
     assert c["shield"]["a_brake"] == 3.0 and c["shield"]["drone_radius"] > 0 and "v_max" in c["shield"]
     assert c["navigator"]["mpc"]["horizon"] == 20 and "cruise_speed" in c["navigator"]
     assert c["map"]["p_hit"] == 0.75 and c["map"]["size"][0] > 15  # sized to the corridor, then overridden
-    assert c["episode"]["duration"] == 1.5 and "dodt" not in c and s["static_map"] == "truth"
+    assert c["episode"]["duration"] == 1.5 and "dodt" not in c and s["static_map"] == "truth"  # set, not used
     assert s["sim_time"] == pytest.approx(1.5, abs=0.02)
     with gzip.open(out / "log.jsonl.gz", "rt") as fh:
         assert json.loads(fh.readline())["config"] == c
@@ -188,16 +189,17 @@ def test_a_sweep_folder_keeps_one_configuration(tmp_path, capsys):
     assert "other configuration overrides" in capsys.readouterr().err
 
 
-def test_a_dodt_run_records_its_moving_rule_and_dodt_sections(tmp_path):
+def test_a_dodt_run_records_its_dodt_section(tmp_path):
     out = tmp_path / "o"
     assert main(["run", "corridor", "--seed", "0", "--duration", "0.5", "--frame-latency", "0", "--out", str(out),
-                 "--set", "moving_rule.min_speed=0.6", "--set", "moving_rule.height=[0.9, 2.4]"]) == 0
+                 "--set", "dodt.motion.min_speed=0.6", "--set", "dodt.motion.height=[0.9, 2.4]"]) == 0
     c = json.loads((out / "summary.json").read_text())["config"]
-    assert c["set"] == {"moving_rule.min_speed": 0.6, "moving_rule.height": [0.9, 2.4]}
-    assert c["moving_rule"]["min_speed"] == 0.6 and c["moving_rule"]["height"] == [0.9, 2.4]
+    assert c["set"] == {"dodt.motion.min_speed": 0.6, "dodt.motion.height": [0.9, 2.4]}
+    motion = c["dodt"]["motion"]
+    assert motion["min_speed"] == 0.6 and motion["height"] == [0.9, 2.4]
     # every section the episode used, overridden or not, with its full values; none it did not use
-    assert c["moving_rule"]["max_speed"] == 2.5 and "oracle" not in c and c["dodt"]["kalman"]["q_pos"] > 0
-    assert {"episode", "shield", "navigator", "map", "dodt", "moving_rule"} <= set(c)
+    assert motion["max_speed"] == 2.5 and "oracle" not in c and c["dodt"]["kalman"]["q_pos"] > 0
+    assert {"episode", "shield", "navigator", "map", "dodt"} <= set(c)
     with gzip.open(out / "log.jsonl.gz", "rt") as fh:
         assert json.loads(fh.readline())["config"] == c
 
