@@ -248,7 +248,8 @@ class MotionConfig:
     person walking straight at the camera (the surface moves along the rays, so nearest-neighbour
     matches fall short of the vote threshold): such a person can be tracked at the right velocity yet
     labelled static. A track labelled dynamic once (by either route) stays so below ``min_speed``: a
-    walker slowing down to turn or stop loses the vote and the speed, not the chance that it walks on."""
+    walker slowing down to turn or stop loses the vote and the speed, not the chance that it walks on.
+    The label needs a static map (DODT.set_scene) to tell a static obstacle's edge from a person."""
 
     enabled: bool = True
     min_speed: float = 0.5  # m/s, filtered horizontal speed ...
@@ -257,8 +258,8 @@ class MotionConfig:
     max_footprint: float = 1.2  # m, longest horizontal side: not a wall seen end-on
     min_age: float = 0.2  # s, a track this old at least
     # A measured box lying this much (share of its footprint) on structure the static map has held for a
-    # second or more (DODT.set_scene; none without a map) is a static obstacle's edge, not a person: that
-    # track is never labelled dynamic by motion again
+    # second or more (DODT.set_scene; without a map the label is off) is a static obstacle's edge, not a
+    # person: that track is never labelled dynamic by motion again
     on_structure: float = 0.2
     # m: a box whose bottom is this close above the lowest height the camera sees at the box is taken to
     # be cut by the image's lower edge (dodt.motion_label.person_tall)

@@ -193,7 +193,7 @@ def write_tables(out: Path, overall: dict, per_scn: dict, per_seed: dict | None 
               "moving counts a dynamic track farther than 0.5 m from every person once per stretch; the speed is the "
               "largest any track reported; track ID switches match people to tracks of any label."]
     lines += ["", "Time to moving, from a walking person's first visible frame within 5 m to the first frame a "
-              "dynamic track is matched to it (DODT's label, with the motion label but without a static map), median / 90th percentile s (stretches reported; "
+              "dynamic track is matched to it (DODT's label; without a static map, the motion label is off), median / 90th percentile s (stretches reported; "
               "never reported): " + ", ".join(
                   f"{r['configuration']} {_fmt(r['moving_latency_median_s'], 2)} / "
                   f"{_fmt(r['moving_latency_p90_s'], 2)} ({r['moving_latency_n']}; {r['moving_latency_unreported']})"

@@ -21,8 +21,15 @@ def _track(coasting=False, speed=0.8, dynamic=False, size=(0.5, 0.5, 1.7), id=7,
                            history=np.zeros((0, 4)), filter_velocity=v, evidence="voting" if dynamic else "")
 
 
+def _label(cfg=MotionConfig()):
+    """The label with a map that holds no structure anywhere."""
+    label = MotionLabel(cfg)
+    label.structure_test = lambda center, size: 0.0
+    return label
+
+
 def test_person_like_tracks_at_walking_speed_are_dynamic_by_motion():
-    label = MotionLabel(MotionConfig())
+    label = _label()
     out = label((_track(), _track(id=8, speed=0.2), _track(id=9, size=(2.5, 0.3, 1.7)), _track(id=10, age=0.1)))
     assert [(o.id, o.dynamic, o.evidence) for o in out] == [(7, True, "motion"), (8, False, ""), (9, False, ""),
                                                             (10, False, "")]
@@ -33,7 +40,7 @@ def test_person_like_tracks_at_walking_speed_are_dynamic_by_motion():
 def test_a_track_dynamic_once_stays_so_when_it_slows_down():
     """A walker slowing to turn or stop keeps the label (labelled by voting or by motion before); one never
     seen walking does not get it; the shape and top speed tests still apply."""
-    label = MotionLabel(MotionConfig())
+    label = _label()
     assert not label.moving(_track(speed=0.1))  # never seen walking
     assert label.moving(_track(speed=1.0))
     assert label.moving(_track(speed=0.1)) and label.moving(_track(speed=0.0))
@@ -47,7 +54,7 @@ def test_a_track_dynamic_once_stays_so_when_it_slows_down():
 
 
 def test_a_voted_track_keeps_its_evidence():
-    o = MotionLabel(MotionConfig())((_track(dynamic=True),))[0]
+    o = _label()((_track(dynamic=True),))[0]
     assert o.dynamic and o.evidence == "voting"
 
 
@@ -62,8 +69,9 @@ def test_a_track_once_seen_on_long_held_structure_is_never_dynamic_by_motion():
     assert not label.moving(_track(coasting=True)) and not label.moving(_track())
 
 
-def test_disabled_labels_nothing():
-    assert not MotionLabel(MotionConfig(enabled=False))((_track(speed=1.0),))[0].dynamic
+def test_disabled_or_without_a_map_labels_nothing():
+    assert not _label(MotionConfig(enabled=False))((_track(speed=1.0),))[0].dynamic
+    assert not MotionLabel(MotionConfig())((_track(speed=1.0),))[0].dynamic
 
 
 def _camera_frame():
@@ -100,7 +108,10 @@ def test_the_height_test_is_plain_for_whole_boxes():
     assert not person_tall(_track(size=(0.5, 0.5, 2.6)), cfg, frame)  # taller than a person
 
 
-def _walk(cfg, scene=None, frames=30):
+NO_STRUCTURE = SimpleNamespace(established_fraction=lambda c, s: 0.0)
+
+
+def _walk(cfg, scene=NO_STRUCTURE, frames=30):
     """DODT on a synthetic person walking towards the camera at 1 m/s: each frame's (dynamic, evidence)."""
     d = DODT(cfg)
     if scene is not None:
@@ -117,12 +128,13 @@ def _walk(cfg, scene=None, frames=30):
 
 def test_dodt_labels_a_walker_the_vote_misses_dynamic_by_motion():
     """With the vote switched off (no speed reaches its threshold), the walker is dynamic by motion from
-    min_age on; without the label it never is; on a map's long-held structure it is not."""
+    min_age on; without the label, or without a map, it never is; on a map's long-held structure it is not."""
     no_vote = replace(preset("dodt"), identification=IdentificationConfig(velocity_threshold=10.0))
     labels = _walk(no_vote)
     first = labels.index((True, "motion"))
     assert 6 <= first <= 12 and all(lab == (True, "motion") for lab in labels[first:])
     assert not any(d for d, _ in _walk(replace(no_vote, motion=MotionConfig(enabled=False))))
+    assert not any(d for d, _ in _walk(no_vote, scene=None))
     on_structure = SimpleNamespace(established_fraction=lambda c, s: 1.0)
     assert not any(d for d, _ in _walk(no_vote, scene=on_structure))
     assert _walk(preset("dodt"))[-1] == (True, "voting")
