@@ -161,7 +161,7 @@ def write_tables(out: Path, overall: dict, per_scn: dict, per_seed: dict | None 
                      "phantom_moving_per_min": s.get("phantom_moving_per_min"),
                      "max_reported_speed_mps": s.get("max_reported_speed"),
                      "track_id_switches": s.get("track_id_switches"),
-                     # time to moving (experiments.perception_metrics.PerceptionMetrics._stretch)
+                     # time to moving (experiments.perception_metrics.MovingLatency)
                      "moving_latency_median_s": s.get("moving_latency_median", float("nan")),
                      "moving_latency_p90_s": s.get("moving_latency_p90", float("nan")),
                      "moving_latency_n": s.get("moving_latency_n"),

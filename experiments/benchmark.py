@@ -143,12 +143,18 @@ def build_report(out: Path, split: str, seeds: list[int], cells: list[Cell], don
         agg = aggregate(summaries, c.family, c.perception)
         person = [s["min_clearance"]["person"] for s in summaries if s["min_clearance"]["person"] is not None]
         rigs = sorted({str(s.get("rig", "front")) for s in summaries})
+        # time to moving, pooled over the cell's stretches (experiments.episode_metrics)
+        lat = [x for s in summaries for x in (s.get("track_life") or {}).get("moving_latencies", ())]
+        unreported = sum((s.get("track_life") or {}).get("moving_latency_unreported") or 0 for s in summaries)
         rows.append({"family": c.family, "people": c.people, "perception": c.perception, "rig": ", ".join(rigs),
                      "episodes": agg["episodes"], "rates": agg["rates"],
                      "time_to_goal_median": agg["time_to_goal"].get("median"),
                      "min_person_clearance": _dist(person), "contact_speeds": agg["contact_speeds"],
                      "failed_seeds": [r["seed"] for r in agg["per_seed"] if not r["success"]],
-                     "module_errors": agg["module_errors"]})
+                     "module_errors": agg["module_errors"],
+                     "moving_latency": {"n": len(lat), "unreported": unreported,
+                                        "median": float(np.median(lat)) if lat else None,
+                                        "p90": float(np.percentile(lat, 90)) if lat else None}})
         envs += agg["environments"]
     return {"split": split, "seeds": [seeds[0], seeds[-1]], "seeds_per_cell": len(seeds), "commit": _commit(),
             "environments": distinct(envs), "cells": rows}
@@ -182,6 +188,15 @@ def markdown(report: dict) -> str:
         L += ["", "Drone speed at each contact [m/s], by fault class:", ""]
         for r, k, v in speeds:
             L.append(f"- {r['family']} / {r['people']} / {r['perception']}, {k}: " + ", ".join(f"{x:.2f}" for x in v))
+    lat = [r for r in report["cells"] if (r.get("moving_latency") or {}).get("n")]
+    if lat:
+        L += ["", "Time to moving: from a walking person's first frame 0.5-5 m away in the rig's horizontal view to "
+              "the first frame a track labelled dynamic lies on the person, median / 90th percentile [s] (stretches "
+              "reported; never reported):", ""]
+        for r in lat:
+            m = r["moving_latency"]
+            L.append(f"- {r['family']} / {r['people']} / {r['perception']}: {m['median']:.2f} / {m['p90']:.2f} "
+                     f"({m['n']}; {m['unreported']})")
     errs = [(r, e["seed"]) for r in report["cells"] for e in r.get("module_errors") or []]
     if errs:
         L += ["", f"Episodes in which the planner or perception failed ({len(errs)}; each episode folder's "

@@ -19,6 +19,12 @@ of any structure is a collision all the same (``collisions``).
 ``track_life``: the perception benchmark's track-life figures (experiments.perception_metrics.TrackLife)
 from the frames' records: the tracks perception reported against the people of the ground truth, the
 drone's position standing for the sensor's (continuity counts the people within 5 m of the drone).
+With it, the time to moving (``moving_latency_*``, and the episode's ``moving_latencies`` to pool): for
+each stretch in which a walking person is 0.5-5 m from the drone and inside the horizontal view of one
+of the rig's cameras (any direction with a LiDAR; occlusion is not checked), the time from its first
+such frame to the first in which a track labelled dynamic is matched to the person
+(experiments.perception_metrics.MovingLatency): how long the planner flies before it avoids a person it
+could see as a moving one.
 """
 from __future__ import annotations
 
@@ -31,7 +37,7 @@ import numpy as np
 
 from experiments.episode_log import iter_log
 from experiments.fault import at_fault, classify
-from experiments.perception_metrics import TrackLife
+from experiments.perception_metrics import MovingLatency, TrackLife, match_pairs
 
 END_ZONE_RADIUS = 1.0  # m, horizontal, around the start and the goal: structure clearance is not counted there
 
@@ -53,6 +59,51 @@ def end_zones(header: dict) -> list[tuple[float, float]]:
 def in_end_zone(p, zones) -> bool:
     """Whether position ``p`` lies within END_ZONE_RADIUS, horizontally, of one of ``zones`` (end_zones)."""
     return any(math.hypot(p[0] - x, p[1] - y) <= END_ZONE_RADIUS for x, y in zones)
+
+
+WALKING = 0.1  # m/s: a person this fast or faster walks (the perception benchmark's recall test)
+IN_REACH = (0.5, 5.0)  # m from the drone: the perception benchmark's Table I range
+
+
+def view_test(header: dict):
+    """(drone position, body rotation, point) -> whether the point lies in the horizontal view of one of
+    the header's sensors: a camera's half view from the header's intrinsics about its yaw on the body, all
+    round for a LiDAR."""
+    cam = header.get("camera") or {}
+    sensors = header.get("sensors") or [{"kind": "camera", "yaw": 0.0}]
+    if any(s.get("kind") == "lidar" for s in sensors):
+        return lambda p, R, q: True
+    if not cam.get("fx"):
+        return None
+    half = math.atan2(max(cam["cx"], cam["width"] - cam["cx"]), cam["fx"])
+    yaws = [math.radians(s.get("yaw", 0.0)) for s in sensors if s.get("kind") == "camera"]
+
+    def test(p, R, q):
+        heading = math.atan2(R[1][0], R[0][0])
+        bearing = math.atan2(q[1] - p[1], q[0] - p[0])
+        return any(abs((bearing - heading - y + math.pi) % (2 * math.pi) - math.pi) <= half for y in yaws)
+    return test
+
+
+def _in_view_latency(latency: MovingLatency, r: dict, seen, match_distance: float) -> None:
+    """The time to moving's bookkeeping for a frame record ``r``."""
+    p, R = r["p"], r.get("R")
+    if R is None or seen is None:
+        return
+    dyn = [o["center"][:2] for o in r.get("tracks", ()) if o["dynamic"]]
+    walking = []
+    for o in r.get("people", ()):
+        c = [(a + b) / 2 for a, b in zip(o["lo"], o["hi"])]
+        v = o.get("v", (0.0, 0.0))
+        d = math.dist(c, p)
+        if math.hypot(v[0], v[1]) > WALKING and IN_REACH[0] <= d <= IN_REACH[1] and seen(p, R, c):
+            walking.append((o["id"], c[:2]))
+    if not walking:
+        return
+    matched = {j for _, j in match_pairs(np.array(dyn, dtype=float).reshape(-1, 2),
+                                         np.array([c for _, c in walking], dtype=float), match_distance)}
+    for j, (pid, _) in enumerate(walking):
+        latency.add(r["t"], pid, j in matched)
 
 
 def summarize_log(path: Path) -> dict:
@@ -77,6 +128,7 @@ def summarize(records: Iterable[dict]) -> dict:
     n_frames = n_skipped = 0
     collisions = []
     life = TrackLife()
+    latency, seen = MovingLatency(), None
     for r in records:
         k = r["k"]
         if k == "s":
@@ -101,6 +153,7 @@ def summarize(records: Iterable[dict]) -> dict:
                 life.add(r["t"], r["p"], [(o["id"], o["center"], o.get("velocity", (0.0, 0.0, 0.0)), o["dynamic"])
                                           for o in r.get("tracks", ())],
                          [(o["id"], [(a + b) / 2 for a, b in zip(o["lo"], o["hi"])]) for o in r.get("people", ())])
+                _in_view_latency(latency, r, seen, life.match_distance)
         elif k == "plan":
             statuses["plans"] += 1
             statuses["fallbacks"] += r["status"].startswith("fallback")
@@ -113,6 +166,7 @@ def summarize(records: Iterable[dict]) -> dict:
         elif k == "header" and header is None:
             header = r
             zones = end_zones(header)
+            seen = view_test(header)
     if header is None:
         raise ValueError("an episode's records start with its header")
 
@@ -163,7 +217,9 @@ def summarize(records: Iterable[dict]) -> dict:
         "sim_time": round(t_end, 3),
         "planner_stats": statuses,
         "perception_stats": {"frames": n_frames, "skipped": n_skipped},
-        "track_life": life.summary(),
+        "track_life": {**life.summary(), **{k: None if isinstance(v, float) and math.isnan(v) else v
+                                            for k, v in latency.summary().items()},
+                       "moving_latencies": [round(x, 4) for x in latency.latencies]},
         "timing": {
             "planner_solve_ms": timing_stats(solve_ms),
             "perception_ms": timing_stats(perc_ms),

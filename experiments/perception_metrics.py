@@ -59,14 +59,58 @@ MEDIAN_PER_SIGMA = float(np.sqrt(2.0 * np.log(2.0)))
 RECALL_BINS = (0.5, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)  # m, camera distance
 
 
-def _match(tracks_xy: np.ndarray, people_xy: np.ndarray, gate: float) -> list[tuple[int, int]]:
+def match_pairs(tracks_xy: np.ndarray, people_xy: np.ndarray, gate: float) -> list[tuple[int, int]]:
     """One-to-one (track, person) index pairs nearest overall (Hungarian assignment on the horizontal
-    distance between centres), a pair counting only within ``gate`` metres."""
+    distance between centres) among the pairs within ``gate`` metres: the pairs beyond it cost the same
+    large amount, so that no far pair (dropped after) draws a track from a near one."""
     if not len(tracks_xy) or not len(people_xy):
         return []
-    cost = np.linalg.norm(tracks_xy[:, None] - people_xy[None], axis=2)
-    r, c = linear_sum_assignment(cost)
-    return [(i, j) for i, j in zip(r, c) if cost[i, j] <= gate]
+    dist = np.linalg.norm(tracks_xy[:, None] - people_xy[None], axis=2)
+    r, c = linear_sum_assignment(np.where(dist <= gate, dist, 1e6))
+    return [(i, j) for i, j in zip(r, c) if dist[i, j] <= gate]
+
+
+@dataclass
+class MovingLatency:
+    """Time to moving: for each stretch in which a walking person is in view and within reach (a stretch
+    ends after ``stretch_gap`` s not so), the time from its first such frame to the first in which a track
+    labelled dynamic is matched to the person (0 when one already is). ``add`` once per frame and person
+    in view."""
+
+    stretch_gap: float = 0.5  # s a person may go unseen within one stretch
+    stretches: dict = field(default_factory=dict)  # person id -> [first visible, last visible, reported]
+    latencies: list = field(default_factory=list)  # s, one per stretch reported moving
+    unreported: int = 0  # closed stretches without a dynamic report
+
+    def add(self, stamp: float, pid, reported: bool) -> None:
+        st = self.stretches.get(pid)
+        if st is not None and stamp - st[1] > self.stretch_gap:  # a new stretch: the last one ended
+            self.unreported += not st[2]
+            st = None
+        if st is None:
+            st = self.stretches[pid] = [stamp, stamp, False]
+        st[1] = stamp
+        if reported and not st[2]:
+            st[2] = True
+            self.latencies.append(stamp - st[0])
+
+    def all_unreported(self) -> int:
+        """Stretches without a dynamic report: the closed ones and those still open."""
+        return self.unreported + sum(not st[2] for st in self.stretches.values())
+
+    def summary(self) -> dict:
+        x = self.latencies
+        return {"moving_latency_median": float(np.median(x)) if x else float("nan"),
+                "moving_latency_p90": float(np.percentile(x, 90)) if x else float("nan"),
+                "moving_latency_n": len(x), "moving_latency_unreported": self.all_unreported()}
+
+    @staticmethod
+    def combine(parts: list["MovingLatency"]) -> "MovingLatency":
+        m = MovingLatency()
+        for p in parts:
+            m.latencies += p.latencies
+            m.unreported += p.all_unreported()
+        return m
 
 
 @dataclass
@@ -114,7 +158,7 @@ class TrackLife:
         p_xyz = np.array([np.asarray(c, dtype=float)[:3] for _, c in people]).reshape(-1, 3)
         for _, _, v, _ in tracks:
             self.max_speed = max(self.max_speed, float(math.hypot(v[0], v[1])))
-        matched = {j: tracks[i][0] for i, j in _match(t_xy, p_xyz[:, :2], self.match_distance)}
+        matched = {j: tracks[i][0] for i, j in match_pairs(t_xy, p_xyz[:, :2], self.match_distance)}
         for j, tid in matched.items():
             pid = people[j][0]
             if pid in self.last_id and self.last_id[pid] != tid:
@@ -194,10 +238,7 @@ class PerceptionMetrics:
     life: TrackLife = field(default_factory=TrackLife)
     # recall of the people all round the sensors (a rig's), not only of those in the first camera's view
     all_round: bool = False
-    stretch_gap: float = 0.5  # s a person may go unseen within one stretch of the time to moving
-    stretches: dict = field(default_factory=dict)  # person id -> [first visible, last visible, reported]
-    moving_latency: list = field(default_factory=list)  # s, one per stretch reported moving
-    unreported: int = 0  # closed stretches without a dynamic report
+    latency: MovingLatency = field(default_factory=MovingLatency)
 
     def _score_predictions(self, stamp: float, people: dict) -> None:
         """Scores the predictions due by ``stamp`` against ``people`` ({id: (2,) xy})."""
@@ -287,25 +328,8 @@ class PerceptionMetrics:
                 self.visible_people += 1
                 self.recalled_people += p.id in matched_people
             if dist <= self.table_range:
-                self._stretch(float(truth.stamp), p.id, p.id in matched_people)
+                self.latency.add(float(truth.stamp), p.id, p.id in matched_people)
         self.series.append((truth.stamp, float(np.mean(fe)) if fe else np.nan, float(np.mean(fv)) if fv else np.nan))
-
-    def _stretch(self, stamp: float, pid, reported: bool) -> None:
-        """The time to moving's bookkeeping for a person visible at ``stamp``."""
-        st = self.stretches.get(pid)
-        if st is not None and stamp - st[1] > self.stretch_gap:  # a new stretch: the last one ended
-            self.unreported += not st[2]
-            st = None
-        if st is None:
-            st = self.stretches[pid] = [stamp, stamp, False]
-        st[1] = stamp
-        if reported and not st[2]:
-            st[2] = True
-            self.moving_latency.append(stamp - st[0])
-
-    def _all_unreported(self) -> int:
-        """Stretches without a dynamic report: the closed ones and those still open."""
-        return self.unreported + sum(not st[2] for st in self.stretches.values())
 
     def summary(self) -> dict:
         def mean(x):
@@ -330,13 +354,7 @@ class PerceptionMetrics:
                 "std_scale": (float(np.median(self.std_ratio)) / MEDIAN_PER_SIGMA if self.std_ratio
                               else float("nan")),
                 "pred_err_cv": mean(self.pred_cv), "pred_err_ca": mean(self.pred_ca), "predicted": len(self.pred_cv),
-                "moving_latency_median": (float(np.median(self.moving_latency)) if self.moving_latency
-                                          else float("nan")),
-                "moving_latency_p90": (float(np.percentile(self.moving_latency, 90)) if self.moving_latency
-                                       else float("nan")),
-                "moving_latency_n": len(self.moving_latency),
-                "moving_latency_unreported": self._all_unreported(),
-                **self.life.summary()}
+                **self.latency.summary(), **self.life.summary()}
 
     @staticmethod
     def combine(parts: list["PerceptionMetrics"]) -> dict:
@@ -352,14 +370,13 @@ class PerceptionMetrics:
             m.vel_err_beyond += p.vel_err_beyond
             m.static_speeds += p.static_speeds
             m.still_speeds += p.still_speeds
-            m.moving_latency += p.moving_latency
-            m.unreported += p._all_unreported()
             for k in ("dynamic_reports", "false_dynamic", "duplicates", "visible_people", "recalled_people",
                       "id_switches", "frames"):
                 setattr(m, k, getattr(m, k) + getattr(p, k))
             m.visible_by_bin = [a + b for a, b in zip(m.visible_by_bin, p.visible_by_bin)]
             m.recalled_by_bin = [a + b for a, b in zip(m.recalled_by_bin, p.recalled_by_bin)]
         m.life = TrackLife.combine([p.life for p in parts])
+        m.latency = MovingLatency.combine([p.latency for p in parts])
         return m.summary()
 
 

@@ -118,10 +118,17 @@ def test_time_to_moving_per_stretch_in_view():
         tracks = [_track(11, 2.0, 0.1, 1.0)] if t >= 1.6 - 1e-9 else []
         result, truth = _frame([_person(1, 2.0, 0.0), _person(3, 4.0, -1.0)], tracks)
         m.add(result, SimpleNamespace(**{**vars(truth), "stamp": t}), K)
-    assert sorted(m.moving_latency) == pytest.approx([0.0, 0.2, 0.3])
+    assert sorted(m.latency.latencies) == pytest.approx([0.0, 0.2, 0.3])
     s = m.summary()
     assert s["moving_latency_n"] == 3 and s["moving_latency_median"] == pytest.approx(0.2)
     assert s["moving_latency_unreported"] == 2  # person 3, twice
     both = PerceptionMetrics.combine([m, m])
     assert both["moving_latency_n"] == 6 and both["moving_latency_unreported"] == 4
     assert np.isnan(PerceptionMetrics().summary()["moving_latency_median"])
+
+
+def test_matching_keeps_the_near_pair_when_the_overall_nearest_assignment_would_not():
+    """Unconstrained, pairing track 0 with person 1 and track 1 with person 0 costs less in all (7.2 against
+    7.27 m), and neither pair is within the gate; gated, track 0 is matched to person 0."""
+    from experiments.perception_metrics import match_pairs
+    assert match_pairs(np.array([[2.1, 0.0], [-3.1, 0.0]]), np.array([[2.0, 0.0], [4.0, 1.0]]), 0.5) == [(0, 0)]

@@ -110,3 +110,40 @@ def test_the_closed_loop_summary_has_the_track_life_figures_from_the_log(tmp_pat
     s = summarize_log(tmp_path / "log.jsonl.gz")
     assert s == summarize(_log_records())
     expect(s["track_life"], rel=1e-3)
+
+
+def _view_records(sensors):
+    """Drone at the origin facing +x (yaw 0), a 640 x 480 camera with fx 385 (half view 39.7 deg).
+    Person 1 walks 2 m ahead, a dynamic track on it from frame 6 (0.2 s) on; person 2 walks 3 m behind, a
+    dynamic track on it from frame 3; person 3 walks 4 m ahead, 1 m to the side (14 deg), only a static
+    track on it; person 4 stands 2.5 m ahead, never reported."""
+    yield {"k": "header", "scenario": "s", "seed": 0, "perception": "dodt", "planner": "P", "people": [],
+           "sensors": sensors, "camera": {"width": 640, "height": 480, "fx": 385.0, "fy": 385.0, "cx": 320.0,
+                                          "cy": 240.0}}
+    people = {1: ((2.0, 0.0), (1.0, 0.0)), 2: ((-3.0, 0.0), (1.0, 0.0)), 3: ((4.0, 1.0), (0.0, 1.0)),
+              4: ((2.5, 0.5), (0.0, 0.0))}
+    for k in range(30):
+        tracks = [(3, (4.0, 1.0, 0.9), False)]
+        if k >= 6:
+            tracks.append((1, (2.1, 0.0, 0.9), True))
+        if k >= 3:
+            tracks.append((2, (-3.1, 0.0, 0.9), True))
+        yield {"k": "f", "t": round(k / FPS, 4), "p": [0.0, 0.0, 1.2], "R": np.eye(3).tolist(), "perc_ms": 1.0,
+               "map_ms": None, "skipped": None,
+               "tracks": [{"id": i, "center": list(c), "size": [0.5, 0.5, 1.7], "velocity": [0.0, 0.0, 0.0],
+                           "dynamic": d, "coasting": False} for i, c, d in tracks],
+               "people": [{"id": pid, "lo": [x - 0.2, y - 0.2, 0.0], "hi": [x + 0.2, y + 0.2, 1.8], "v": list(v)}
+                          for pid, ((x, y), v) in people.items()]}
+    yield {"k": "end", "t": 1.0, "reason": "timeout", "reached_goal": False, "time_to_goal": None}
+
+
+def test_the_closed_loop_time_to_moving_counts_walkers_in_the_rigs_view():
+    front = summarize(_view_records([{"name": "front", "kind": "camera", "yaw": 0.0}]))["track_life"]
+    assert front["moving_latencies"] == pytest.approx([0.2])  # person 1; 2 is behind, 3 unreported, 4 stands
+    assert front["moving_latency_n"] == 1 and front["moving_latency_unreported"] == 1
+    back = summarize(_view_records([{"name": "back", "kind": "camera", "yaw": 180.0}]))["track_life"]
+    assert back["moving_latencies"] == pytest.approx([0.1]) and back["moving_latency_unreported"] == 0
+    lidar = summarize(_view_records([{"name": "front", "kind": "camera", "yaw": 0.0},
+                                     {"name": "lidar", "kind": "lidar", "yaw": 0.0}]))["track_life"]
+    assert sorted(lidar["moving_latencies"]) == pytest.approx([0.1, 0.2]) and lidar["moving_latency_unreported"] == 1
+    assert lidar["moving_latency_median"] == pytest.approx(0.15)
