@@ -66,20 +66,20 @@ IN_REACH = (0.5, 5.0)  # m from the drone: the perception benchmark's Table I ra
 
 
 def view_test(header: dict):
-    """(drone position, body rotation, point) -> whether the point lies in the horizontal view of one of
+    """(drone position, body rotation (9,) row by row, point) -> whether the point lies in the horizontal view of one of
     the header's sensors: a camera's half view from the header's intrinsics about its yaw on the body, all
     round for a LiDAR."""
     cam = header.get("camera") or {}
-    sensors = header.get("sensors") or [{"kind": "camera", "yaw": 0.0}]
+    sensors = header.get("sensors") or [{"kind": "rgbd", "yaw": 0.0}]
     if any(s.get("kind") == "lidar" for s in sensors):
         return lambda p, R, q: True
     if not cam.get("fx"):
         return None
     half = math.atan2(max(cam["cx"], cam["width"] - cam["cx"]), cam["fx"])
-    yaws = [math.radians(s.get("yaw", 0.0)) for s in sensors if s.get("kind") == "camera"]
+    yaws = [math.radians(s.get("yaw", 0.0)) for s in sensors]  # cameras all (a LiDAR sees all round)
 
     def test(p, R, q):
-        heading = math.atan2(R[1][0], R[0][0])
+        heading = math.atan2(R[3], R[0])  # R: the body's rotation, row by row
         bearing = math.atan2(q[1] - p[1], q[0] - p[0])
         return any(abs((bearing - heading - y + math.pi) % (2 * math.pi) - math.pi) <= half for y in yaws)
     return test

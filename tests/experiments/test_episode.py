@@ -228,3 +228,14 @@ def test_a_lidar_rig_episode_fuses_the_scans_and_says_its_rig(tmp_path):
     assert 14 <= spy.scans <= 16  # 10 Hz over 1.5 s
     header = read_log(tmp_path / "log.jsonl.gz")[0]
     assert header["rig"] == "lidar" and [x["kind"] for x in header["sensors"]] == ["rgbd", "lidar"]
+
+
+def test_the_summary_times_how_soon_a_person_in_view_is_known_moving():
+    """The oracle reports the crossing person at once from the first frame it is in the camera's view within
+    5 m: one stretch, known moving at once. The figure comes from the log's frames, as the flight saw them."""
+    s = run_episode(_scenario(), seed=0, perception="oracle", cfg=EpisodeConfig(duration=3.0))
+    life = s["track_life"]
+    assert life["moving_latency_n"] == 1 and life["moving_latencies"] == [0.0]
+    assert life["moving_latency_unreported"] == 0
+    blind = run_episode(_scenario(), seed=0, perception="static-only", cfg=EpisodeConfig(duration=3.0))
+    assert blind["track_life"]["moving_latency_n"] == 0 and blind["track_life"]["moving_latency_unreported"] == 1

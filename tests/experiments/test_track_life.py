@@ -112,7 +112,7 @@ def test_the_closed_loop_summary_has_the_track_life_figures_from_the_log(tmp_pat
     expect(s["track_life"], rel=1e-3)
 
 
-def _view_records(sensors):
+def _view_records(sensors, yaw=0.0):
     """Drone at the origin facing +x (yaw 0), a 640 x 480 camera with fx 385 (half view 39.7 deg).
     Person 1 walks 2 m ahead, a dynamic track on it from frame 6 (0.2 s) on; person 2 walks 3 m behind, a
     dynamic track on it from frame 3; person 3 walks 4 m ahead, 1 m to the side (14 deg), only a static
@@ -128,7 +128,7 @@ def _view_records(sensors):
             tracks.append((1, (2.1, 0.0, 0.9), True))
         if k >= 3:
             tracks.append((2, (-3.1, 0.0, 0.9), True))
-        yield {"k": "f", "t": round(k / FPS, 4), "p": [0.0, 0.0, 1.2], "R": np.eye(3).tolist(), "perc_ms": 1.0,
+        yield {"k": "f", "t": round(k / FPS, 4), "p": [0.0, 0.0, 1.2], "R": _yaw(yaw), "perc_ms": 1.0,
                "map_ms": None, "skipped": None,
                "tracks": [{"id": i, "center": list(c), "size": [0.5, 0.5, 1.7], "velocity": [0.0, 0.0, 0.0],
                            "dynamic": d, "coasting": False} for i, c, d in tracks],
@@ -137,13 +137,21 @@ def _view_records(sensors):
     yield {"k": "end", "t": 1.0, "reason": "timeout", "reached_goal": False, "time_to_goal": None}
 
 
+def _yaw(a):
+    """A body rotation about z by ``a`` radians, row by row, as the log records it."""
+    c, s = np.cos(a), np.sin(a)
+    return [c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]
+
+
 def test_the_closed_loop_time_to_moving_counts_walkers_in_the_rigs_view():
-    front = summarize(_view_records([{"name": "front", "kind": "camera", "yaw": 0.0}]))["track_life"]
+    front = summarize(_view_records([{"name": "front", "kind": "rgbd", "yaw": 0.0}]))["track_life"]
     assert front["moving_latencies"] == pytest.approx([0.2])  # person 1; 2 is behind, 3 unreported, 4 stands
     assert front["moving_latency_n"] == 1 and front["moving_latency_unreported"] == 1
-    back = summarize(_view_records([{"name": "back", "kind": "camera", "yaw": 180.0}]))["track_life"]
+    back = summarize(_view_records([{"name": "back", "kind": "rgbd", "yaw": 180.0}]))["track_life"]
     assert back["moving_latencies"] == pytest.approx([0.1]) and back["moving_latency_unreported"] == 0
-    lidar = summarize(_view_records([{"name": "front", "kind": "camera", "yaw": 0.0},
+    turned = summarize(_view_records([{"name": "front", "kind": "rgbd", "yaw": 0.0}], yaw=np.pi))["track_life"]
+    assert turned["moving_latencies"] == back["moving_latencies"]  # the drone turned round sees person 2
+    lidar = summarize(_view_records([{"name": "front", "kind": "rgbd", "yaw": 0.0},
                                      {"name": "lidar", "kind": "lidar", "yaw": 0.0}]))["track_life"]
     assert sorted(lidar["moving_latencies"]) == pytest.approx([0.1, 0.2]) and lidar["moving_latency_unreported"] == 1
     assert lidar["moving_latency_median"] == pytest.approx(0.15)
