@@ -194,6 +194,10 @@ class TrackConfig:
     # where it was, its velocity toward the camera removed: nothing passes through the camera.
     # None: off
     camera_body_radius: float | None = 0.3
+    # m: a coasting track whose prediction takes its centre nearer a wall of the geofence than this (a
+    # person's radius), or beyond it, is held where it was across the wall, its velocity into the wall
+    # removed: nothing walks through walls (DODT.set_scene gives the geofence; without one, off). None: off
+    wall_clearance: float | None = 0.2
     output_history: float = 3.0  # s of centre history kept and output (the paper's figures show 3 s)
     # output size: exponential smoothing weight of the new detection, per frame at reference_rate (ours)
     size_smoothing: float = 0.3
@@ -261,6 +265,10 @@ class MotionConfig:
     # second or more (DODT.set_scene; without a map the label is off) is a static obstacle's edge, not a
     # person: that track is never labelled dynamic by motion again
     on_structure: float = 0.2
+    # m: a measured box whose centre lies this close to a side of the geofence (DODT.set_scene; the
+    # corridor's walls), or beyond it, is a fragment of the wall, never labelled dynamic by motion again: no
+    # person's centre comes closer to a wall than the person's radius
+    wall_margin: float = 0.15
     # m: a box whose bottom is this close above the lowest height the camera sees at the box is taken to
     # be cut by the image's lower edge (dodt.motion_label.person_tall)
     bottom_edge_tolerance: float = 0.15
@@ -273,9 +281,9 @@ class MotionConfig:
             raise ValueError(f"motion: height must be [low, high] with 0 <= low <= high, got {[lo, hi]}")
         if not self.max_footprint > 0.0:
             raise ValueError(f"motion: max_footprint must be > 0, got {self.max_footprint}")
-        if not self.min_age >= 0.0 or not self.bottom_edge_tolerance >= 0.0:
-            raise ValueError(f"motion: min_age and bottom_edge_tolerance must be >= 0, got {self.min_age} and "
-                             f"{self.bottom_edge_tolerance}")
+        if not self.min_age >= 0.0 or not self.bottom_edge_tolerance >= 0.0 or not self.wall_margin >= 0.0:
+            raise ValueError(f"motion: min_age, bottom_edge_tolerance and wall_margin must be >= 0, got "
+                             f"{self.min_age}, {self.bottom_edge_tolerance} and {self.wall_margin}")
         if not 0.0 <= self.on_structure <= 1.0:
             raise ValueError(f"motion: on_structure is a share of the footprint, 0 to 1, got {self.on_structure}")
 

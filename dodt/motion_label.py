@@ -3,10 +3,9 @@ identification, deciding with the point voting which tracks DODT reports dynamic
 
 A track the voting and the learned detector leave static is labelled dynamic when it is a standing
 person's box (height, footprint) tracked at walking speed for ``min_age`` at least, and does not lie on
-structure the static map has held for a while. The label needs that map (``structure_test``): without
-one it labels nothing, since a static pillar or a box's edge seen from a moving camera is often tracked
-at walking speed too (in the perception benchmark, without a map, it labelled static obstacles dynamic
-and the false-positive rate rose tenfold). Once labelled dynamic, by any route, a track keeps the
+structure the static map has held for a while, nor on a wall of the geofence. The label needs that map
+(``structure_test``): without one it labels nothing, since a static pillar or a box's edge seen from a
+moving camera is often tracked at walking speed too (docs/perception.md). Once labelled dynamic, by any route, a track keeps the
 label however slowly it moves while it stays person-shaped. Every track says which evidence labelled
 it (``TrackedObstacle.evidence``): a consumer that frees space under dynamic tracks (the planner's map)
 may trust the voting more than motion alone.
@@ -59,6 +58,7 @@ class MotionLabel:
     def __init__(self, cfg: MotionConfig):
         self.cfg = cfg
         self.structure_test: StructureTest | None = None
+        self.geofence: tuple[np.ndarray, np.ndarray] | None = None  # (x, y) low, high: its sides are walls
         self._on_structure: set[int] = set()
         self._dynamic: set[int] = set()  # labelled dynamic once, by any route
 
@@ -78,11 +78,19 @@ class MotionLabel:
             return False
         if o.id in self._on_structure:
             return False
-        if not o.coasting and self.structure_test(o.center, o.size) >= m.on_structure:
+        if not o.coasting and (self.structure_test(o.center, o.size) >= m.on_structure or self._on_wall(o)):
             self._on_structure.add(o.id)
             return False
         self._dynamic.add(o.id)
         return True
+
+    def _on_wall(self, o: TrackedObstacle) -> bool:
+        """The box's centre lies within wall_margin of a side of the geofence, or beyond it."""
+        if self.geofence is None:
+            return False
+        lo, hi = self.geofence
+        c, m = o.center[:2], self.cfg.wall_margin
+        return bool(np.any(c <= lo + m) or np.any(c >= hi - m))
 
     def __call__(self, obstacles, frame=None) -> tuple[TrackedObstacle, ...]:
         """The tracks with their final label and its evidence."""

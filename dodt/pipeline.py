@@ -185,9 +185,12 @@ class DODT:
         """What the LiDAR detector knows of the scene (dodt.lidar_detector): the static map
         (a dodt.context.StaticMapView), the geofence ((x, y) low, (x, y) high; its sides are walls),
         the LiDAR's lowest ray's elevation [rad]. The motion label checks its tracks against the static
-        map's long-held structure (``established_fraction``; dodt.motion_label)."""
+        map's long-held structure (``established_fraction``) and the geofence's walls (dodt.motion_label);
+        the tracker holds coasting tracks off those walls (track.wall_clearance)."""
         self._lidar_view = (static_map, geofence, lidar_elevation_min)
         self.motion.structure_test = getattr(static_map, "established_fraction", None)
+        walls = None if geofence is None else (np.asarray(geofence[0], float), np.asarray(geofence[1], float))
+        self.motion.geofence = self.tracker.walls = walls
 
     def observe_lidar(self, scan) -> None:
         """Keep a LiDAR scan (dodt.frames.LidarScan) for the next frame: its boxes join that frame's

@@ -10,7 +10,8 @@ back; unmatched detections start tracks. Then each track is identified static or
 Physical bounds (track.max_speed, track.jump_margin, track.camera_body_radius; ours): no filter
 velocity exceeds a person's top speed, a prediction stays within that speed of where the track was
 last measured, a detection farther from the track than a person could have moved re-initialises
-it, and a coasting prediction does not pass through the camera's body.
+it, and a coasting prediction passes neither through the camera's body nor through a wall of the
+geofence.
 
 Every window is a span of time (dodt.config's module docstring, dodt.windows).
 """
@@ -311,6 +312,22 @@ class Track:
             v[:] = 0.0
         return True
 
+    def hold_inside(self, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """Hold a prediction that would take the centre into a wall of the geofence ((x, y) ``lo``, ``hi``):
+        on each axis where the centre lies within track.wall_clearance of a side, or beyond it, and moves
+        toward that side, the position goes back to where it was on that axis and the velocity into the
+        wall is removed. Returns whether it was held."""
+        r = self.cfg.track.wall_clearance
+        if r is None or self.before_predict is None:
+            return False
+        c, v, held = self.center_xy, self.kf.x[2:4], False
+        for k in (0, 1):
+            if (c[k] < lo[k] + r and v[k] < 0.0) or (c[k] > hi[k] - r and v[k] > 0.0):
+                self.kf.x[k] = self.before_predict[k]
+                v[k] = 0.0
+                held = True
+        return held
+
     def update(self, det: Detection, seq: int, stamp: float) -> None:
         k = self.cfg.kalman
         n_avg = max(1, self.clock.intervals(k.averaging_time))  # 10 observations back at 30 Hz
@@ -496,6 +513,7 @@ class Tracker:
         self._next_id = 1
         self.clock = FrameClock(cfg.reference_rate)
         self.restarts = 0  # tracks re-initialised after a jump (Track.jumped)
+        self.walls: tuple[np.ndarray, np.ndarray] | None = None  # the geofence, (x, y) low and high
 
     def reset(self) -> None:
         self.tracks = []
@@ -636,6 +654,8 @@ class Tracker:
                 tr.missed += 1
                 if camera is not None:
                     tr.hold_off_camera(camera)
+                if self.walls is not None:
+                    tr.hold_inside(*self.walls)
             survivors.append(tr)
             c = tr.center_xy
             tr.add_history(stamp, float(c[0]), float(c[1]), tr.z)

@@ -439,6 +439,7 @@ LIMITS: dict[str, Limit] = {
     "dodt.track.max_coast_speed": _SPEED,
     "dodt.track.max_speed": _real(0.0, 10.0, lo_open=True, optional=True),  # m/s; none: unbounded
     "dodt.track.jump_margin": _real(0.0, 10.0, optional=True),  # m; none: never re-initialised
+    "dodt.track.wall_clearance": _real(0.0, 10.0, optional=True),  # m
     "dodt.track.camera_body_radius": _real(0.0, 5.0, optional=True),  # m; none: off
     "dodt.track.output_history": _HISTORY,
     "dodt.track.size_smoothing": _FRACTION,  # weight per frame
@@ -468,6 +469,7 @@ LIMITS: dict[str, Limit] = {
     "dodt.motion.max_footprint": _real(0.0, 50.0, lo_open=True),  # m
     "dodt.motion.min_age": _HISTORY,
     "dodt.motion.on_structure": _FRACTION,
+    "dodt.motion.wall_margin": _real(0.0, 10.0),  # m
     "dodt.motion.bottom_edge_tolerance": _real(0.0, 10.0),  # m
     "dodt.learned.enabled": BOOL,
     "dodt.learned.model": ANY_STRING,  # a path; "": the shipped model

@@ -111,15 +111,16 @@ def test_the_height_test_is_plain_for_whole_boxes():
 NO_STRUCTURE = SimpleNamespace(established_fraction=lambda c, s: 0.0)
 
 
-def _walk(cfg, scene=NO_STRUCTURE, frames=30):
-    """DODT on a synthetic person walking towards the camera at 1 m/s: each frame's (dynamic, evidence)."""
+def _walk(cfg, scene=NO_STRUCTURE, frames=30, y=0.0, geofence=None):
+    """DODT on a synthetic person walking towards the camera at 1 m/s, ``y`` to the side: each frame's
+    (dynamic, evidence)."""
     d = DODT(cfg)
     if scene is not None:
-        d.set_scene(scene)
+        d.set_scene(scene, geofence)
     K, T, out = CameraIntrinsics(), camera_pose(), []
     for i in range(frames):
         x = 5.0 - i / 30
-        depth = render_depth(K, T, [((x - 0.25, -0.25, 0.0), (x + 0.25, 0.25, 1.7))])
+        depth = render_depth(K, T, [((x - 0.25, y - 0.25, 0.0), (x + 0.25, y + 0.25, 1.7))])
         r = d.process(SensorFrame(depth=depth, color=None, intrinsics=K, T_world_camera=T, stamp=i / 30, seq=i))
         assert len(r.obstacles) == 1
         out.append((r.obstacles[0].dynamic, r.obstacles[0].evidence))
@@ -138,7 +139,21 @@ def test_dodt_labels_a_walker_the_vote_misses_dynamic_by_motion():
     on_structure = SimpleNamespace(established_fraction=lambda c, s: 1.0)
     assert not any(d for d, _ in _walk(no_vote, scene=on_structure))
     assert _walk(preset("dodt"))[-1] == (True, "voting")
+    walls = (np.array([0.0, -1.2]), np.array([16.0, 1.2]))
+    assert _walk(no_vote, y=-0.5, geofence=walls)[-1] == (True, "motion")
+    assert not any(d for d, _ in _walk(no_vote, y=-1.1, geofence=walls))  # centre 0.1 m off a wall
 
 
 def test_the_baselines_do_without_the_motion_label():
     assert all(c.motion.enabled == n.startswith("dodt") for n, c in PRESETS.items())
+
+
+def test_a_box_on_a_wall_of_the_geofence_is_never_dynamic_by_motion():
+    """A box whose centre lies within wall_margin of the geofence's side (a wall fragment tracked moving
+    along the wall) is never labelled, not even when later measured away from it; one 0.3 m off is."""
+    label = _label()
+    label.geofence = (np.array([0.0, -2.0]), np.array([16.0, 2.0]))
+    on_wall = replace(_track(id=3), center=np.array([6.0, 1.9, 0.9]))
+    assert not label.moving(on_wall) and not label.moving(replace(on_wall, center=np.array([6.0, 1.0, 0.9])))
+    assert not label.moving(replace(_track(id=4), center=np.array([6.0, -2.3, 0.9])))  # beyond the wall
+    assert label.moving(replace(_track(id=5), center=np.array([6.0, 1.7, 0.9])))

@@ -163,3 +163,34 @@ def test_a_track_passing_beside_the_camera_keeps_going_and_one_held_slides_past(
         assert np.hypot(*c) >= 0.3 + tr.half_width - 1e-9
     assert float(tr.kf.velocity @ (c / np.hypot(*c))) >= -1e-9  # nothing toward the camera
     assert np.hypot(*tr.kf.velocity) > 0.1  # still sliding along
+
+
+@pytest.mark.parametrize("clearance", [0.2, None])
+def test_a_coasting_track_is_not_predicted_through_a_wall(clearance):
+    """A track coasting at 1.5 m/s along x and 1 m/s toward the wall at y = 2 (the geofence's side) stops
+    short of it by the clearance at most one frame's step past, loses its velocity into the wall and
+    keeps going along it; without the rule (or without a geofence) it passes through."""
+    tracker = Tracker(with_track(wall_clearance=clearance))
+    tracker.walls = (np.array([0.0, -2.0]), np.array([16.0, 2.0]))
+    step(tracker, 0, [det((4.0, 1.2, 0.9))])
+    tracker.tracks[0].kf.x[2:4] = (1.5, 1.0)
+    farthest = -np.inf
+    for k in range(1, 25):
+        step(tracker, k, [])
+        tr = tracker.tracks[0]
+        farthest = max(farthest, float(tr.center_xy[1]))
+    if clearance is None:
+        assert farthest > 2.0
+        return
+    assert farthest < 2.0 - clearance + 1.0 / FPS + 1e-9  # at most one step past the clearance
+    assert abs(tr.kf.velocity[1]) < 1e-9 and tr.kf.velocity[0] > 1.0  # sliding along the wall
+    assert tr.center_xy[0] > 4.5
+
+
+def test_a_track_measured_at_a_wall_is_not_held():
+    """A static piece of wall (centre on the geofence's side, no velocity) is tracked where it is measured."""
+    tracker = Tracker(DODTConfig())
+    tracker.walls = (np.array([0.0, -2.0]), np.array([16.0, 2.0]))
+    for k in range(5):
+        step(tracker, k, [det((6.0, 2.0, 0.9), size=(1.0, 0.1, 1.7))])
+    assert tracker.tracks[0].center_xy[1] == pytest.approx(2.0, abs=0.05)
