@@ -1,5 +1,6 @@
 """dodt.motion_label: the last step of identification (tall tracks at walking speed are dynamic)."""
 from dataclasses import replace
+from functools import lru_cache
 from types import SimpleNamespace
 
 import numpy as np
@@ -111,7 +112,14 @@ def test_the_height_test_is_plain_for_whole_boxes():
 NO_STRUCTURE = SimpleNamespace(established_fraction=lambda c, s: 0.0)
 
 
-def _walk(cfg, scene=NO_STRUCTURE, frames=30, y=0.0, geofence=None):
+@lru_cache(maxsize=64)
+def _walker_depth(i: int, y: float) -> np.ndarray:
+    """Frame i's depth image of a person walking towards the camera at 1 m/s from 5 m, ``y`` to the side."""
+    x = 5.0 - i / 30
+    return render_depth(CameraIntrinsics(), camera_pose(), [((x - 0.25, y - 0.25, 0.0), (x + 0.25, y + 0.25, 1.7))])
+
+
+def _walk(cfg, scene=NO_STRUCTURE, frames=15, y=0.0, geofence=None):
     """DODT on a synthetic person walking towards the camera at 1 m/s, ``y`` to the side: each frame's
     (dynamic, evidence)."""
     d = DODT(cfg)
@@ -119,8 +127,7 @@ def _walk(cfg, scene=NO_STRUCTURE, frames=30, y=0.0, geofence=None):
         d.set_scene(scene, geofence)
     K, T, out = CameraIntrinsics(), camera_pose(), []
     for i in range(frames):
-        x = 5.0 - i / 30
-        depth = render_depth(K, T, [((x - 0.25, y - 0.25, 0.0), (x + 0.25, y + 0.25, 1.7))])
+        depth = _walker_depth(i, y)
         r = d.process(SensorFrame(depth=depth, color=None, intrinsics=K, T_world_camera=T, stamp=i / 30, seq=i))
         assert len(r.obstacles) == 1
         out.append((r.obstacles[0].dynamic, r.obstacles[0].evidence))

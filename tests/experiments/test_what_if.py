@@ -36,7 +36,7 @@ class _Reports:
     """Stands in for DODT: reports the given obstacles at every frame."""
 
     def __init__(self, *reports):
-        self.reports, self.structure_test = reports, None
+        self.reports = reports
 
     def reset(self, context=None):
         pass
@@ -123,8 +123,9 @@ def test_what_if_modes_need_the_truth_and_plug_in_by_name():
     p = make_perception("experiments.what_if:ViewCompleted")
     assert isinstance(p, what_if.ViewCompleted) and p.uses_ground_truth and p.name == "dodt+ViewCompleted"
     ctx = _context_with_map()
-    p.reset(ctx)  # the episode context's static map reaches DODT's moving-track rule
-    assert p.dodt.structure_test == ctx.static_map.established_fraction
+    p.reset(ctx)  # the episode context's static map and geofence reach DODT's motion label
+    assert p.dodt.dodt.motion.structure_test == ctx.static_map.established_fraction
+    np.testing.assert_array_equal(p.dodt.dodt.motion.geofence[1], ctx.geofence[1])
     with pytest.raises(ValueError, match="ViewCompleted needs the simulator's ground truth"):
         p.update(_frame(), None)
 
