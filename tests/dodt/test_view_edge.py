@@ -73,7 +73,7 @@ def _walk(cfg, y0, vy, seconds, x=3.03, rate=30.0):
     return out
 
 
-@pytest.mark.parametrize("vy", [1.0, -1.0])
+@pytest.mark.parametrize("vy", [1.0, pytest.param(-1.0, marks=pytest.mark.slow)])  # -1: the mirror image
 def test_a_walker_leaving_the_view_sideways_is_measured_from_its_side_in_view_and_predicted_on(vy):
     # from 1.2 m inside the view to 1.2 m beyond its edge
     x = 3.03
