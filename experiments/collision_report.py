@@ -60,14 +60,27 @@ def _heading(frame: dict) -> float:
     return math.atan2(fwd[1], fwd[0])
 
 
+def logged_view_test(header: dict, half_fov: float | None = None):
+    """(frame record, point (x, y)) -> whether the point lies inside the horizontal view of one of the
+    logged rig's cameras from the frame's drone pose (any direction with a LiDAR). ``half_fov`` (rad):
+    None, the logged camera's (logged_half_view)."""
+    half = logged_half_view(header) if half_fov is None else half_fov
+    yaws, all_round = logged_views(header)
+
+    def test(frame: dict, q) -> bool:
+        if all_round:
+            return True
+        bearing = math.atan2(q[1] - frame["p"][1], q[0] - frame["p"][0]) - _heading(frame)
+        return any(abs(wrap_angle(bearing - y)) <= half for y in yaws)
+    return test
+
+
 def collision_rows(records: list[dict], window: float = 2.0, view_range: float = 5.0, match: float = 0.5,
                    half_fov: float | None = None, lost_match: float = 1.2) -> list[dict]:
     """The collisions of one episode's records, as dicts (see the module docstring). ``half_fov``
     (rad): the camera's half view; None: the logged camera's (logged_half_view)."""
     header = records[0]
-    if half_fov is None:
-        half_fov = logged_half_view(header)
-    yaws, all_round = logged_views(header)
+    in_view = logged_view_test(header, half_fov)
     states = [r for r in records if r["k"] == "s"]
     frames = [r for r in records if r["k"] == "f"]
     plans = [r for r in records if r["k"] == "plan" and "threats" in r]
@@ -94,9 +107,7 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                 where.append((f["t"], centre))
                 speeds.append(float(np.hypot(*np.asarray(person["v"], float)[:2])))
                 d = centre - np.asarray(f["p"], float)[:2]
-                bearing = math.atan2(d[1], d[0]) - _heading(f)
-                seen.append((all_round or any(abs(wrap_angle(bearing - y)) <= half_fov for y in yaws))
-                            and float(np.hypot(*d)) <= view_range)
+                seen.append(in_view(f, centre) and float(np.hypot(*d)) <= view_range)
                 near = [tr for tr in f["tracks"] if float(np.hypot(*(np.asarray(tr["center"][:2]) - centre))) <= match]
                 tracked.append(bool(near))
                 moving.append(any(tr.get("dynamic") for tr in near))

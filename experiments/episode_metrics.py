@@ -37,7 +37,9 @@ import numpy as np
 
 from experiments.episode_log import iter_log
 from experiments.fault import at_fault, classify
-from experiments.perception_metrics import MovingLatency, TrackLife, match_pairs
+from experiments.collision_report import logged_view_test
+from experiments.perception_metrics import RECALL_BINS, WALKING_SPEED, MovingLatency, PerceptionMetrics, TrackLife, \
+    match_pairs
 
 END_ZONE_RADIUS = 1.0  # m, horizontal, around the start and the goal: structure clearance is not counted there
 
@@ -61,43 +63,21 @@ def in_end_zone(p, zones) -> bool:
     return any(math.hypot(p[0] - x, p[1] - y) <= END_ZONE_RADIUS for x, y in zones)
 
 
-WALKING = 0.1  # m/s: a person this fast or faster walks (the perception benchmark's recall test)
-IN_REACH = (0.5, 5.0)  # m from the drone: the perception benchmark's Table I range
+IN_REACH = (RECALL_BINS[0], PerceptionMetrics.table_range)  # m from the drone: the perception benchmark's range
 
 
-def view_test(header: dict):
-    """(drone position, body rotation (9,) row by row, point) -> whether the point lies in the horizontal view of one of
-    the header's sensors: a camera's half view from the header's intrinsics about its yaw on the body, all
-    round for a LiDAR."""
-    cam = header.get("camera") or {}
-    sensors = header.get("sensors") or [{"kind": "rgbd", "yaw": 0.0}]
-    if any(s.get("kind") == "lidar" for s in sensors):
-        return lambda p, R, q: True
-    if not cam.get("fx"):
-        return None
-    half = math.atan2(max(cam["cx"], cam["width"] - cam["cx"]), cam["fx"])
-    yaws = [math.radians(s.get("yaw", 0.0)) for s in sensors]  # cameras all (a LiDAR sees all round)
-
-    def test(p, R, q):
-        heading = math.atan2(R[3], R[0])  # R: the body's rotation, row by row
-        bearing = math.atan2(q[1] - p[1], q[0] - p[0])
-        return any(abs((bearing - heading - y + math.pi) % (2 * math.pi) - math.pi) <= half for y in yaws)
-    return test
-
-
-def _in_view_latency(latency: MovingLatency, r: dict, seen, match_distance: float) -> None:
-    """The time to moving's bookkeeping for a frame record ``r``."""
-    p, R = r["p"], r.get("R")
-    if R is None or seen is None:
+def _in_view_latency(latency: MovingLatency, r: dict, people: list, in_view, match_distance: float) -> None:
+    """The time to moving's bookkeeping for a frame record ``r`` whose people are ``people`` ((id, centre)
+    each, in the record's order); ``in_view``: collision_report.logged_view_test's."""
+    if "R" not in r or in_view is None:
         return
     dyn = [o["center"][:2] for o in r.get("tracks", ()) if o["dynamic"]]
     walking = []
-    for o in r.get("people", ()):
-        c = [(a + b) / 2 for a, b in zip(o["lo"], o["hi"])]
+    for (pid, c), o in zip(people, r.get("people", ())):
         v = o.get("v", (0.0, 0.0))
-        d = math.dist(c, p)
-        if math.hypot(v[0], v[1]) > WALKING and IN_REACH[0] <= d <= IN_REACH[1] and seen(p, R, c):
-            walking.append((o["id"], c[:2]))
+        d = math.dist(c, r["p"])
+        if math.hypot(v[0], v[1]) > WALKING_SPEED and IN_REACH[0] <= d <= IN_REACH[1] and in_view(r, c):
+            walking.append((pid, c[:2]))
     if not walking:
         return
     matched = {j for _, j in match_pairs(np.array(dyn, dtype=float).reshape(-1, 2),
@@ -128,7 +108,7 @@ def summarize(records: Iterable[dict]) -> dict:
     n_frames = n_skipped = 0
     collisions = []
     life = TrackLife()
-    latency, seen = MovingLatency(), None
+    latency, in_view = MovingLatency(), None
     for r in records:
         k = r["k"]
         if k == "s":
@@ -150,10 +130,10 @@ def summarize(records: Iterable[dict]) -> dict:
             _finite_times(perc_ms, r.get("perc_ms"))
             _finite_times(map_ms, r.get("map_ms"))
             if "p" in r:  # the drone's position, which the recorder writes with every frame
+                people = [(o["id"], [(a + b) / 2 for a, b in zip(o["lo"], o["hi"])]) for o in r.get("people", ())]
                 life.add(r["t"], r["p"], [(o["id"], o["center"], o.get("velocity", (0.0, 0.0, 0.0)), o["dynamic"])
-                                          for o in r.get("tracks", ())],
-                         [(o["id"], [(a + b) / 2 for a, b in zip(o["lo"], o["hi"])]) for o in r.get("people", ())])
-                _in_view_latency(latency, r, seen, life.match_distance)
+                                          for o in r.get("tracks", ())], people)
+                _in_view_latency(latency, r, people, in_view, life.match_distance)
         elif k == "plan":
             statuses["plans"] += 1
             statuses["fallbacks"] += r["status"].startswith("fallback")
@@ -166,7 +146,7 @@ def summarize(records: Iterable[dict]) -> dict:
         elif k == "header" and header is None:
             header = r
             zones = end_zones(header)
-            seen = view_test(header)
+            in_view = logged_view_test(header)
     if header is None:
         raise ValueError("an episode's records start with its header")
 

@@ -57,6 +57,7 @@ from dodt.geometry import in_field_of_view
 # the median distance from the mean of an isotropic 2D Gaussian, in standard deviations per axis
 MEDIAN_PER_SIGMA = float(np.sqrt(2.0 * np.log(2.0)))
 RECALL_BINS = (0.5, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)  # m, camera distance
+WALKING_SPEED = 0.1  # m/s: a person faster than this walks (recall and time to moving count only walkers)
 
 
 def match_pairs(tracks_xy: np.ndarray, people_xy: np.ndarray, gate: float) -> list[tuple[int, int]]:
@@ -311,7 +312,7 @@ class PerceptionMetrics:
         cam = truth.T_world_camera
         for p in people:
             dist = float(np.linalg.norm(p.center - cam[:3, 3]))
-            if np.linalg.norm(p.velocity[:2]) <= 0.1 or not RECALL_BINS[0] <= dist <= RECALL_BINS[-1]:
+            if np.linalg.norm(p.velocity[:2]) <= WALKING_SPEED or not RECALL_BINS[0] <= dist <= RECALL_BINS[-1]:
                 continue
             if self.all_round:
                 visible = True
