@@ -39,7 +39,7 @@ a pair counting only within ``match_distance`` (0.5 m).
   ``still_distance`` (1 m) from every person (``still_speed_p95``): what a planner that reads every
   obstacle's velocity gets from obstacles that do not move;
 - track life (``TrackLife``, the same figures in the closed-loop summary, read from the episode log):
-  continuity, phantom-moving reports per minute, the largest reported speed, and identity switches
+  continuity, phantom- and drifted-moving reports per minute, the largest reported speed, and identity switches
   over every track, whatever its label.
 """
 from __future__ import annotations
@@ -124,8 +124,11 @@ class TrackLife:
       spent within reach. ``continuity_moving``: the share in which a track labelled dynamic lies
       within ``match_distance`` of the person;
     - phantom-moving reports: a track labelled dynamic farther than ``match_distance`` from every
-      person, counted once per stretch of frames in a row it stays so, per minute of frames
-      (``phantom_moving_s``: the track-seconds of such reports);
+      person that has never been matched to a person (motion invented on structure or noise), counted
+      once per stretch of frames in a row it stays so, per minute of frames (``phantom_moving_s``: the
+      track-seconds of such reports);
+    - drifted-moving reports (``drifted_moving*``): the same for a track that has been matched to a
+      person before (its prediction left the person it followed: a person lost, not one invented);
     - the largest reported horizontal speed of any track, whatever its label;
     - identity switches (``track_id_switches``): a person matched to another track id than the
       last time it was matched (the matching of continuity).
@@ -141,6 +144,10 @@ class TrackLife:
     reported: int = 0  # of those, matched by a track
     reported_moving: int = 0  # of those, with a dynamic track within match_distance
     phantoms: set = field(default_factory=set)  # the track ids phantom-moving in the latest frame
+    drifts: set = field(default_factory=set)  # the track ids drifted-moving in the latest frame
+    on_person: set = field(default_factory=set)  # the track ids ever matched to a person
+    drifted_reports: int = 0
+    drifted_s: float = 0.0  # track-seconds
     track_id_switches: int = 0
     phantom_reports: int = 0
     phantom_s: float = 0.0  # track-seconds
@@ -160,6 +167,7 @@ class TrackLife:
         for _, _, v, _ in tracks:
             self.max_speed = max(self.max_speed, float(math.hypot(v[0], v[1])))
         matched = {j: tracks[i][0] for i, j in match_pairs(t_xy, p_xyz[:, :2], self.match_distance)}
+        self.on_person.update(matched.values())
         for j, tid in matched.items():
             pid = people[j][0]
             if pid in self.last_id and self.last_id[pid] != tid:
@@ -174,10 +182,14 @@ class TrackLife:
                 self.reported += j in matched
                 self.reported_moving += bool(np.any(dyn & (dist[:, j] <= self.match_distance)))
         far = dist.min(axis=1) > self.match_distance if len(people) else np.ones(len(tracks), dtype=bool)
-        now = {tracks[i][0] for i in np.flatnonzero(dyn & far)}
+        off = {tracks[i][0] for i in np.flatnonzero(dyn & far)}
+        now, drifts = off - self.on_person, off & self.on_person
         self.phantom_reports += len(now - self.phantoms)
         self.phantom_s += dt * len(now & self.phantoms)
         self.phantoms = now
+        self.drifted_reports += len(drifts - self.drifts)
+        self.drifted_s += dt * len(drifts & self.drifts)
+        self.drifts = drifts
 
     def summary(self) -> dict:
         """The figures (None where nothing was counted)."""
@@ -187,6 +199,8 @@ class TrackLife:
                 "continuity_frames": self.person_frames,
                 "phantom_moving_per_min": self.phantom_reports / minutes if minutes > 0 else None,
                 "phantom_moving": self.phantom_reports, "phantom_moving_s": round(self.phantom_s, 4),
+                "drifted_moving_per_min": self.drifted_reports / minutes if minutes > 0 else None,
+                "drifted_moving": self.drifted_reports, "drifted_moving_s": round(self.drifted_s, 4),
                 "max_reported_speed": round(self.max_speed, 4), "track_id_switches": self.track_id_switches,
                 "track_life_s": round(self.seconds, 4)}
 
@@ -196,7 +210,7 @@ class TrackLife:
         m = TrackLife()
         for p in parts:
             for k in ("person_frames", "reported", "reported_moving", "track_id_switches", "phantom_reports",
-                      "phantom_s", "seconds"):
+                      "phantom_s", "drifted_reports", "drifted_s", "seconds"):
                 setattr(m, k, getattr(m, k) + getattr(p, k))
             m.max_speed = max(m.max_speed, p.max_speed)
         return m

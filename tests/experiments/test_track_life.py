@@ -45,6 +45,7 @@ def expect(s: dict, rel: float = 1e-6) -> None:
     assert s["phantom_moving"] == 2
     assert s["phantom_moving_s"] == pytest.approx(18 / FPS, rel=rel)  # 9 intervals in each stretch
     assert s["phantom_moving_per_min"] == pytest.approx(2 / ((N - 1) / FPS / 60), rel=rel)
+    assert s["drifted_moving"] == 0  # track 9 was never on a person
     assert s["max_reported_speed"] == pytest.approx(3.0)
 
 
@@ -72,6 +73,25 @@ def test_a_person_reported_again_by_the_same_track_is_no_switch_and_a_nearer_one
     s = life.summary()
     assert s["track_id_switches"] == 0 and s["continuity"] == pytest.approx(2 / 3)
     assert s["continuity_moving"] == pytest.approx(1 / 3) and s["phantom_moving"] == 0  # 7 lies 0.3 m off
+
+
+def test_a_track_that_followed_a_person_and_drifted_off_is_drifted_not_phantom():
+    """Track 4 follows the person, then its prediction runs on 1 m past them (a person lost, not one
+    invented): one drifted-moving report. Track 6 appears 1 m from the person and was never on anyone:
+    one phantom-moving report. Both count the same way again once they are back on and off."""
+    life = TrackLife()
+    person = [(1, (2.0, 0.0, 0.9))]
+    on, off = (2.05, 0.0, 0.9), (3.0, 0.0, 0.9)
+    frames = [[(4, on, (1, 0, 0), True)], [(4, off, (1, 0, 0), True), (6, (2.0, 1.0, 0.9), (1, 0, 0), True)],
+              [(4, off, (1, 0, 0), True), (6, (2.0, 1.0, 0.9), (1, 0, 0), True)],
+              [(4, on, (1, 0, 0), True)], [(4, off, (1, 0, 0), True)]]
+    for k, tracks in enumerate(frames):
+        life.add(0.1 * k, DRONE, tracks, person)
+    s = life.summary()
+    assert s["phantom_moving"] == 1 and s["phantom_moving_s"] == pytest.approx(0.1)
+    assert s["drifted_moving"] == 2 and s["drifted_moving_s"] == pytest.approx(0.1)
+    assert s["drifted_moving_per_min"] == pytest.approx(2 / (0.4 / 60))
+    assert TrackLife.combine([life, life]).summary()["drifted_moving"] == 4
 
 
 def test_the_benchmark_summary_has_the_track_life_figures():
