@@ -172,7 +172,7 @@ class _Looking(_Blind):
         return super().update(frame, truth)
 
 
-@pytest.mark.parametrize("renderer", ["gl", "tiny"])
+@pytest.mark.parametrize("renderer", ["gl", pytest.param("tiny", marks=pytest.mark.slow)])
 def test_frames_carry_colour_only_for_a_perception_that_reads_it(renderer):
     """A module declaring uses_color = False gets depth-only frames (the gl renderer then skips colour); one
     that reads colour, or does not say, gets it. EpisodeConfig.renderer picks the renderer."""

@@ -131,6 +131,7 @@ def test_a_fixed_camera_without_poses_from_the_floor(tmp_path):
     check_scene(tmp_path / "out2", s2)
 
 
+@pytest.mark.slow
 def test_poses_in_a_world_that_is_not_z_up_are_turned_to_the_floor(tmp_path):
     """A motion-capture world with y up and an offset: without the floor fit the ground filter
     throws the scene away; with it, the world is turned so that the floor is at z = 0."""

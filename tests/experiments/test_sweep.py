@@ -491,6 +491,7 @@ def test_results_of_another_perception_mode_are_refused(scenarios, tmp_path):
         run_sweep(str(scenarios["short"]), [0], "oracle", out, progress=False)
 
 
+@pytest.mark.slow
 def test_results_with_another_static_map_are_refused(scenarios, tmp_path):
     """A sweep folder of depth-map episodes is not extended with known-map ones (or back), and a known-map
     sweep records its map in every result (a line from before the option counts as depth)."""
@@ -507,6 +508,7 @@ def test_results_with_another_static_map_are_refused(scenarios, tmp_path):
         run_sweep(str(scenarios["short"]), [2], "oracle", known, progress=False)
 
 
+@pytest.mark.slow
 def test_results_with_another_frame_latency_are_refused(scenarios, tmp_path):
     """Frame latency changes every result: a folder holds one; a line from before the option counts as 0."""
     out, line = _folder_holding(tmp_path, "oracle")

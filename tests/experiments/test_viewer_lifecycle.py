@@ -46,7 +46,7 @@ def _server_ports(pid: int) -> set[int]:
     return ports
 
 
-@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize("how", [signal.SIGKILL, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)])
 def test_the_live_viewer_server_ends_with_a_killed_run_and_frees_its_ports(tmp_path, how):
     run = subprocess.Popen([sys.executable, "-m", "experiments.cli", "run", "corridor", "--perception", "oracle",
                             "--map", "truth", "--duration", "600", "--viz", "live", "--no-wait",

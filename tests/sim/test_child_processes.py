@@ -71,7 +71,7 @@ def test_a_render_process_that_does_not_start_in_time_is_ended(monkeypatch):
     assert wait_for(lambda: not set(children(os.getpid(), b"sim.render_child")) - before, timeout=10)
 
 
-@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize("how", [signal.SIGKILL, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)])
 def test_the_render_process_ends_when_the_process_that_started_it_is_killed(how):
     """Killed while the child builds its world (it reads nothing from its socket then) or later."""
     parent = _python("""

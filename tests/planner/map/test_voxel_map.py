@@ -90,6 +90,7 @@ def _walk(with_boxes, frames=24):
     return m, band, out
 
 
+@pytest.mark.slow
 def test_dynamic_clearing_leaves_no_trail_but_keeps_static_obstacles():
     m, band, out = _walk(with_boxes=True)
     assert len(band) == 0
