@@ -59,8 +59,9 @@ class MapConfig:
     hole_window: int = 2  # px
     # ours: a ray ending on a surface leaves this many voxels just in front of its endpoint unseen (not
     # marked free): depth noise of a few centimetres puts endpoints behind a face, and their rays would
-    # mark the face's own voxels free; 0: the reference (every voxel the ray crosses is seen free)
-    surface_guard: int = 0  # voxels
+    # mark the face's own voxels free (a face seen at a grazing angle is carved away). The layer in front
+    # of a face seen head-on stays unknown; 0: the reference (every voxel the ray crosses is seen free)
+    surface_guard: int = 1  # voxels
     raycast_max: float = 5.0  # m, longest ray; longer ones are shortened and end free, ref raycast_max_length
     skip_pixel: int = 2  # every n-th row and column, ref map yaml depth_skip_pixel
     # ours: a ray stops at a voxel crossed by an earlier ray of its own ray_bundle_px-square pixel block
