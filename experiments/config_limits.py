@@ -343,7 +343,6 @@ LIMITS: dict[str, Limit] = {
     "map.unknown_offset": _real(1e-4, 10.0),  # log-odds; above 0: unknown and free must differ in float32
     "map.depth_min": _real(0.0, 20.0),  # m
     "map.depth_max": _real(0.0, 50.0, lo_open=True),  # m
-    "map.surface_guard": _whole(0, 4),  # voxels; 0: the reference's rule
     "map.hole_window": _whole(0, 8),  # px; 0: the reference's rule (each hole scans (2r+1)^2 pixels)
     "map.raycast_max": _real(0.0, 50.0, lo_open=True),  # m
     "map.skip_pixel": _whole(1, 64),  # px

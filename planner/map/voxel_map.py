@@ -57,11 +57,6 @@ class MapConfig:
     # nearest of them, less a voxel; 0: the reference (a free ray of raycast_max). A RealSense-like sensor
     # leaves holes at depth edges, and a free ray of 5 m from one carves through the structure behind
     hole_window: int = 2  # px
-    # ours: a ray ending on a surface leaves this many voxels just in front of its endpoint unseen (not
-    # marked free): depth noise of a few centimetres puts endpoints behind a face, and their rays would
-    # mark the face's own voxels free (a face seen at a grazing angle is carved away). The layer in front
-    # of a face seen head-on stays unknown; 0: the reference (every voxel the ray crosses is seen free)
-    surface_guard: int = 1  # voxels
     raycast_max: float = 5.0  # m, longest ray; longer ones are shortened and end free, ref raycast_max_length
     skip_pixel: int = 2  # every n-th row and column, ref map yaml depth_skip_pixel
     # ours: a ray stops at a voxel crossed by an earlier ray of its own ray_bundle_px-square pixel block
@@ -87,9 +82,9 @@ class MapConfig:
                              f"got {self.unknown_offset}")
         if self.skip_pixel < 1 or self.margin < 0 or self.dynamic_history < 1 or self.ray_bundle_px < 0 \
                 or self.ray_bundle_px % self.skip_pixel or self.static_after < 0 or self.protect_before < 0 \
-                or self.hole_window < 0 or self.surface_guard < 0:
+                or self.hole_window < 0:
             raise ValueError("MapConfig: need skip_pixel >= 1, margin >= 0, dynamic_history >= 1, "
-                             "static_after >= 0, hole_window >= 0, surface_guard >= 0 and ray_bundle_px a non-negative multiple of "
+                             "static_after >= 0, hole_window >= 0 and ray_bundle_px a non-negative multiple of "
                              "skip_pixel")
         cells = math.prod(max(round(x / self.resolution), 1) for x in self.size)
         if cells > MAX_MAP_CELLS:
@@ -121,14 +116,13 @@ def _nearest_return(depth, v, u, r):
 
 @njit(cache=True, nogil=True)
 def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, rmax, res, dims, blo, bhi,
-                regions, stamp, hits, misses, touched, base, protected, hole, guard):
+                regions, stamp, hits, misses, touched, base, protected, hole):
     """Ray-cast one frame, counting hits and misses per voxel (cv: camera in voxel units). A point inside
     a dynamic region, unless its voxel is ``protected`` (VoxelMap._established), counts as neither: the
     voxels before the region are seen free, the region's are left as they were (a walker, or structure
     beside it; depth noise puts points behind a face, and their rays would carve it). A pixel
     without a return is a free ray of raycast_max, or, with returns within ``hole`` pixels, a free ray up
-    to a voxel short of the nearest of them. A ray ending on a surface does not see the ``guard`` voxels
-    it crosses first, back from its endpoint, free.
+    to a voxel short of the nearest of them.
 
     stamp[k] holds the id of the last ray bundle that crossed voxel k; ids grow across frames, so
     stamp[k] >= base means "counted this frame" and stamp[k] == bid "crossed by this bundle", where
@@ -195,7 +189,6 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                     stamp[idx] = bid
                     if free and not unseen:
                         misses[idx] = min(misses[idx] + 1, 32767)
-                    left = 0 if free else guard  # voxels just in front of a surface: not seen free
                     # Amanatides & Woo toward the camera; per-axis step counts end it in the camera voxel
                     ri, rj, rk = abs(ci - i), abs(cj - j), abs(ck - k)
                     di = si if ci > i else -si
@@ -227,9 +220,6 @@ def _cast_frame(depth, fx, fy, cx, cy, R, cv, margin, skip, bundle, dmin, dmax, 
                         st = stamp[idx]
                         if st == bid:
                             break
-                        if left > 0:
-                            left -= 1
-                            continue
                         if st < base:
                             hits[idx] = misses[idx] = 0
                             touched[n] = idx
@@ -499,7 +489,7 @@ class VoxelMap:
                             np.ascontiguousarray(T[:3, :3]), (cam - self.origin) / self.res, c.margin,
                             c.skip_pixel, bundle, c.depth_min, c.depth_max, c.raycast_max, self.res, self.dims,
                             blo, bhi, hist, self._stamp, self._hits, self._misses, self._touched,
-                            self._next_bundle, protected.reshape(-1), c.hole_window, c.surface_guard)
+                            self._next_bundle, protected.reshape(-1), c.hole_window)
             self._next_bundle += int(r[1])
             _apply(self.log_odds.reshape(-1), self._touched, r[0], self._hits, self._misses, hist, self.dims,
                    self.l_hit, self.l_miss, self.l_min, self.l_max, self.l_occ, self._since.reshape(-1),
