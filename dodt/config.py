@@ -434,6 +434,11 @@ class LidarDetectorConfig:
     vote_span: float = 0.5  # s
     vote_scans: int = 3
     vote_velocity: float = 0.25  # m/s
+    # ours: a point whose surface (its normal from its nearest points, turned towards the sensor now) faced
+    # away from every scan voted against, by more than this cosine, was not seen then: it does not vote.
+    # A static obstacle the sensor passes shows new faces, whose points find the old faces' within reach
+    # and would vote moving. None: every point votes
+    face_cos: float | None = -0.1
 
 
 @dataclass(frozen=True)

@@ -79,7 +79,8 @@ def _nearest(points, data, reach):
 
 
 def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_world_camera_then,
-         K: CameraIntrinsics, max_depth: float, cfg: IdentificationConfig) -> tuple[int, int, int]:
+         K: CameraIntrinsics, max_depth: float, cfg: IdentificationConfig,
+         seen_then: np.ndarray | None = None) -> tuple[int, int, int]:
     """(votes, valid, skipped) of the point voting.
 
     ``cloud_then`` is a k-d tree (or an (M, 3) array) of the whole filtered cloud k frames back,
@@ -87,7 +88,8 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     Matching against the whole cloud, not only the track's own points back then, keeps a
     static obstacle static when its box grows (more of it seen, or split from a neighbour):
     its points find their unmoved twins wherever they were. ``K`` None: the cloud is an all-round
-    LiDAR's (dodt.lidar_detector), in whose view every point was.
+    LiDAR's (dodt.lidar_detector), in whose view every point was. ``seen_then`` (n,) bool: which points
+    could have been seen back then (``faced_then``); the others are skipped.
     """
     n = len(points_now)
     tree = cloud_then if isinstance(cloud_then, cKDTree) else None
@@ -102,7 +104,7 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     # In view back then, and not at the edge of the depth range, where the filtered cloud thins out (K None:
     # an all-round sensor's cloud, cropped to its range by its detector: every point was in view).
     if K is None:
-        seen = np.ones(n, bool)
+        seen = np.ones(n, bool) if seen_then is None else np.asarray(seen_then, bool).copy()
     else:
         seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth - cfg.range_margin,
                                 margin_px=cfg.fov_margin_px)
@@ -129,6 +131,30 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     votes = int(np.sum(np.linalg.norm(v[valid], axis=1) > cfg.vote_velocity))
     n_valid = int(valid.sum())
     return votes, n_valid, n - n_valid
+
+
+def faced_then(points: np.ndarray, origin_now, origins_then, cos_min: float | None, k: int = 8) -> np.ndarray | None:
+    """(n,) bool: whether each point's surface faced at least one of ``origins_then`` (the sensor's earlier
+    positions) by a cosine of at least ``cos_min``. A point's normal is the least-spread axis of its ``k``
+    nearest points of ``points``, turned towards ``origin_now`` (the surface is seen from there). None when
+    ``cos_min`` is None or there are too few points for normals (every point may vote)."""
+    n = len(points)
+    if cos_min is None or n < 3 or not len(origins_then):
+        return None
+    P = np.asarray(points, dtype=np.float64)
+    k = min(k, n)
+    _, idx = cKDTree(P).query(P, k=k)
+    nb = P[idx] - P[idx].mean(axis=1, keepdims=True)  # (n, k, 3)
+    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
+    normal = vecs[:, :, 0]  # the eigenvector of the smallest eigenvalue
+    to_now = np.asarray(origin_now, dtype=np.float64) - P
+    normal *= np.where(np.einsum("ni,ni->n", normal, to_now) < 0, -1.0, 1.0)[:, None]
+    faced = np.zeros(n, bool)
+    for o in origins_then:
+        to_then = np.asarray(o, dtype=np.float64) - P
+        cos = np.einsum("ni,ni->n", normal, to_then) / np.maximum(np.linalg.norm(to_then, axis=1), 1e-9)
+        faced |= cos >= cos_min
+    return faced
 
 
 def is_candidate(speed: float, votes: int, valid: int, skipped: int, cfg: IdentificationConfig) -> bool:

@@ -133,7 +133,8 @@ class DODT:
         self.lidar = LidarDetector(self.cfg.lidar, self.cfg.voxel.ground_height, self.cfg.voxel.ceiling_height)
         self._scan = None  # the latest LiDAR scan not yet fused (observe_lidar)
         self._others: tuple = ()  # the rig's other cameras' frames for the next frame (observe_cameras)
-        self.lidar_clouds: deque[tuple[float, np.ndarray]] = deque()  # (frame stamp, LiDAR cloud) to vote with
+        # (frame stamp, LiDAR cloud, the scan's origin (3,)) to vote with
+        self.lidar_clouds: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
         # the rig's other cameras' poses and clouds by frame seq, to vote with: {sensor: (poses, clouds, K)}
         self.other_views: dict[str, tuple[dict, dict, object]] = {}
         self._lidar_view = (None, None, None)  # (static map, geofence, lowest ray's elevation): set_scene
@@ -243,7 +244,7 @@ class DODT:
         out = []
         grow = self.cfg.lidar.voxel
         found = self.lidar(scan, static_map, geofence, el_min)
-        self.lidar_clouds.append((stamp, self.lidar.last_cloud))
+        self.lidar_clouds.append((stamp, self.lidar.last_cloud, np.asarray(scan.T_world_sensor, float)[:3, 3].copy()))
         # s: the voting's reach back and its scans (at 10 Hz), and a period to spare
         span = self.cfg.lidar.vote_span + 0.1 * (self.cfg.lidar.vote_scans + 1)
         while self.lidar_clouds and self.lidar_clouds[0][0] < stamp - span:

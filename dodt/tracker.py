@@ -30,7 +30,7 @@ from dodt.config import DODTConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics
 from dodt.geometry import column_bounds, crop_to_box, wrap_angle
-from dodt.identification import decide, is_candidate, match_reach, size_ok, vote
+from dodt.identification import decide, faced_then, is_candidate, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
 from dodt.learned.layout import iou_one
 from dodt.result import TrackedObstacle
@@ -390,8 +390,8 @@ class Track:
 
     def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float,
                  lidar_clouds=(), other_cameras=None) -> None:
-        """clouds(seq) -> that frame's whole filtered cloud, or None. lidar_clouds: (stamp, filtered cloud)
-        of the recent LiDAR scans, oldest first (a track a LiDAR box updated votes against them).
+        """clouds(seq) -> that frame's whole filtered cloud, or None. lidar_clouds: (stamp, filtered cloud,
+        the scan's origin) of the recent LiDAR scans, oldest first (a track a LiDAR box updated votes against them).
         other_cameras: {sensor: (poses, clouds, K)} of the rig's other cameras (a track another camera
         measured votes in that camera's view)."""
         cfg = self.cfg.identification
@@ -443,11 +443,12 @@ class Track:
         LiDAR's view all round (every point was in it)."""
         lc = self.cfg.lidar
         cfg = replace(self.cfg.identification, vote_velocity=lc.vote_velocity)
-        then = [(t, c) for t, c in lidar_clouds if t <= now - lc.vote_span + 1e-6][-lc.vote_scans:]
+        then = [(t, c, o) for t, c, o in lidar_clouds if t <= now - lc.vote_span + 1e-6][-lc.vote_scans:]
+        here = [o for t, _, o in lidar_clouds if abs(t - now) <= 1e-6]
         votes, valid, skipped = 0, 0, len(points)
         if then and speed >= cfg.velocity_threshold and len(points):
             t_then = then[-1][0]
-            cloud = np.concatenate([c for _, c in then]) if len(then) > 1 else then[0][1]
+            cloud = np.concatenate([c for _, c, _ in then]) if len(then) > 1 else then[0][1]
             old = [c for c in self.clouds if c[1] <= t_then + 1e-6]
             dt = now - t_then
             if len(cloud) and dt > 0:
@@ -456,7 +457,10 @@ class Track:
                 r = match_reach(dt, cfg)
                 lo, hi = column_bounds(points)
                 near = crop_to_box(cloud, lo.astype(cloud.dtype) - r, hi.astype(cloud.dtype) + r)
-                votes, valid, skipped = vote(points, near, dt, v_box, None, None, 0.0, cfg)
+                # a surface that faced away from every scan voted against was not seen then (another face of
+                # the obstacle, come into view as the sensor passed it): its points do not vote
+                facing = faced_then(points, here[-1], [o for _, _, o in then], lc.face_cos) if here else None
+                votes, valid, skipped = vote(points, near, dt, v_box, None, None, 0.0, cfg, seen_then=facing)
         self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))
 
     def _decide(self, cand: bool) -> None:
