@@ -151,6 +151,14 @@ def cmd_bench(args) -> int:
         bench_perception.run(Path(args.out), list(range(args.seeds or 1)), scenarios, configs, duration, rates=rates,
                              rig_name=args.rig or "front")
         return 0
+    if args.what in ("planner", "loop"):  # --config names the perception mode
+        from experiments.plugins import PluginError
+        from experiments.registry import check_perception
+
+        try:
+            check_perception(args.config)
+        except PluginError as e:
+            raise UserError(f"bench {args.what}: --config: {e}") from None
     if args.what == "planner":
         from experiments import bench_planner
         from experiments.bench_map import bench_update
@@ -189,8 +197,12 @@ def cmd_bench(args) -> int:
         for k in ("perception_ms", "map_update_ms", "planner_solve_ms"):
             print(f"  {k}: median {tm[k].get('median')} ms, p95 {tm[k].get('p95')} ms, p99 {tm[k].get('p99')} ms")
         return 0
+    from dodt.presets import PRESETS
     from experiments import bench_perception
 
+    if args.config not in PRESETS:
+        raise UserError(f"bench runtime: --config takes a DODT configuration ({', '.join(PRESETS)}), "
+                        f"got {args.config!r}")
     load_scenario(args.scenario)
     bench_perception.run_runtime(args.config, args.scenario, seconds=args.seconds,
                                  json_out=args.json, rig_name=args.rig or "front")

@@ -177,6 +177,24 @@ def test_bench_refuses_an_option_that_does_not_apply_to_it(monkeypatch, tmp_path
     assert not (tmp_path / "out").exists() and not (tmp_path / "out.json").exists()
 
 
+@pytest.mark.parametrize("what, names", [("runtime", "a DODT configuration"), ("loop", "unknown mode"),
+                                          ("planner", "unknown mode")])
+def test_bench_refuses_an_unknown_config_before_it_starts(monkeypatch, capsys, what, names):
+    """--config names a DODT configuration (runtime) or a perception mode (loop, planner): a file name
+    there is one line on stderr and exit 2, not a traceback from deep inside the bench."""
+    import experiments.commands.bench as bench
+    from experiments.cli import main
+
+    def ran(*a, **k):
+        raise AssertionError("the bench started")
+
+    monkeypatch.setattr(bench, "load_scenario", ran)
+    assert main(["bench", what, "--config", "mine.toml"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"dodt-nav: error: bench {what}: --config") and "mine.toml" in err and names in err
+    assert len(err.strip().splitlines()) == 1
+
+
 def test_bench_takes_the_options_of_its_bench_and_fills_in_the_defaults():
     from experiments.cli import build_parser
     from experiments.commands.bench import check_applies
