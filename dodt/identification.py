@@ -104,10 +104,12 @@ def vote(points_now: np.ndarray, cloud_then, dt: float, v_box: np.ndarray, T_wor
     # In view back then, and not at the edge of the depth range, where the filtered cloud thins out (K None:
     # an all-round sensor's cloud, cropped to its range by its detector: every point was in view).
     if K is None:
-        seen = np.ones(n, bool) if seen_then is None else np.asarray(seen_then, bool).copy()
+        seen = np.ones(n, bool)
     else:
         seen = in_field_of_view(points_now, T_world_camera_then, K, max_depth - cfg.range_margin,
                                 margin_px=cfg.fov_margin_px)
+    if seen_then is not None:
+        seen &= np.asarray(seen_then, bool)
     # A nearest neighbour farther than anything walks in dt is no correspondence: that surface
     # was not in the cloud back then (occluded, too sparse, out of range). The search stops at
     # that bound (much faster); beyond it the tree answers distance inf and index M.

@@ -444,7 +444,6 @@ class Track:
         lc = self.cfg.lidar
         cfg = replace(self.cfg.identification, vote_velocity=lc.vote_velocity)
         then = [(t, c, o) for t, c, o in lidar_clouds if t <= now - lc.vote_span + 1e-6][-lc.vote_scans:]
-        here = [o for t, _, o in lidar_clouds if abs(t - now) <= 1e-6]
         votes, valid, skipped = 0, 0, len(points)
         if then and speed >= cfg.velocity_threshold and len(points):
             t_then = then[-1][0]
@@ -459,6 +458,7 @@ class Track:
                 near = crop_to_box(cloud, lo.astype(cloud.dtype) - r, hi.astype(cloud.dtype) + r)
                 # a surface that faced away from every scan voted against was not seen then (another face of
                 # the obstacle, come into view as the sensor passed it): its points do not vote
+                here = [o for t, _, o in lidar_clouds if abs(t - now) <= 1e-6]  # the scan that measured it
                 facing = faced_then(points, here[-1], [o for _, _, o in then], lc.face_cos) if here else None
                 votes, valid, skipped = vote(points, near, dt, v_box, None, None, 0.0, cfg, seen_then=facing)
         self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))

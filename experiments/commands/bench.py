@@ -9,8 +9,8 @@ from pathlib import Path
 from sim.scenario import RENDERER_CHOICES, load_scenario
 
 from experiments.config_limits import PLANNER_NAMES, RIG_NAMES
-from experiments.commands.common import (RENDERER_HELP, LazyText, UserError, add_command, dodt_presets, examples,
-                                         output_folder, seconds, whole, writable_file)
+from experiments.commands.common import (RENDERER_HELP, LazyText, UserError, add_command, check_perception,
+                                         dodt_presets, examples, output_folder, seconds, whole, writable_file)
 
 
 BENCHES = ("sim", "perception", "runtime", "planner", "loop")
@@ -152,13 +152,7 @@ def cmd_bench(args) -> int:
                              rig_name=args.rig or "front")
         return 0
     if args.what in ("planner", "loop"):  # --config names the perception mode
-        from experiments.plugins import PluginError
-        from experiments.registry import check_perception
-
-        try:
-            check_perception(args.config)
-        except PluginError as e:
-            raise UserError(f"bench {args.what}: --config: {e}") from None
+        check_perception(args.config, f"bench {args.what}: --config")
     if args.what == "planner":
         from experiments import bench_planner
         from experiments.bench_map import bench_update

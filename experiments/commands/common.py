@@ -117,15 +117,16 @@ def output_folder(path: str, option: str = "--out") -> Path:
 # --------------------------------------------------------------------------- plug-ins and configuration
 
 
-def check_perception(mode: str) -> None:
-    """A built-in mode or a plug-in's module:Class that loads and implements the protocol."""
+def check_perception(mode: str, flag: str = "--perception") -> None:
+    """A built-in mode or a plug-in's module:Class that loads and implements the protocol; the error names
+    ``flag``, the option that gave it."""
     from experiments.plugins import PluginError
     from experiments.registry import check_perception as check
 
     try:
         check(mode)
     except PluginError as e:
-        raise UserError(f"--perception: {e}") from None
+        raise UserError(f"{flag}: {e}") from None
 
 
 def check_planner(spec: str) -> str | None:
