@@ -11,8 +11,8 @@ Per track and frame, a candidate test:
    and the frame says nothing;
 3. candidate if votes / valid points >= T_ratio.
 A track is dynamic once every frame within the last ``consistency_span`` seconds was a candidate,
-and stays dynamic while at least ``force_dynamic_fraction`` of its frames over the last
-``force_dynamic_span`` were dynamic (windows of time: dodt.windows). A
+and stays dynamic while at least ``force_dynamic_fraction`` of its frames with a detection over the
+last ``force_dynamic_span`` were dynamic (windows of time: dodt.windows). A
 track flagged a person by a learned detector is dynamic at once, for as long as the flag lasts:
 the flag does not enter the candidates or that history (ours), so it cannot lock a standing
 obstacle dynamic.
@@ -176,13 +176,16 @@ def size_ok(size: np.ndarray, cfg: IdentificationConfig) -> bool:
 
 
 def decide(candidates: list[bool], dynamic_history: list[bool], cfg: IdentificationConfig,
-           clock: FrameClock | None = None) -> bool:
+           clock: FrameClock | None = None, lock_clock: FrameClock | None = None) -> bool:
     """Consistency over frames, with the reference code's hysteresis, and ours: a dynamic track
     turns static only when no frame over ``release_span`` was a candidate.
 
     candidates: of the frames with a detection, up to this one; dynamic_history: the labels of
-    the frames before this one. The spans are counted in frames at ``clock``'s frame period
-    (default: the reference rate)."""
+    the frames with a detection before this one (a coasting track's label is held, not evidence:
+    counted, the frames a dynamic track coasted through locked it). The spans are counted in frames
+    at ``clock``'s frame period (default: the reference rate), the force-dynamic window at
+    ``lock_clock``'s (default ``clock``): the period of the sensor that measures the track, a LiDAR's
+    scans for a track its boxes update."""
     clock = clock or FrameClock()
     n = clock.frames_within(cfg.consistency_span)
     if len(candidates) >= n and all(candidates[-n:]):
@@ -192,5 +195,5 @@ def decide(candidates: list[bool], dynamic_history: list[bool], cfg: Identificat
         return True
     if cfg.force_dynamic_span is None:
         return False
-    w = clock.intervals(cfg.force_dynamic_span) + 1
+    w = (lock_clock or clock).intervals(cfg.force_dynamic_span) + 1
     return len(dynamic_history) >= w and sum(dynamic_history[-w:]) >= cfg.force_dynamic_fraction * w - 1e-9

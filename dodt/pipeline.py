@@ -244,6 +244,8 @@ class DODT:
         out = []
         grow = self.cfg.lidar.voxel
         found = self.lidar(scan, static_map, geofence, el_min)
+        if self.lidar_clouds:
+            self.tracker.lidar_clock.observe(stamp - self.lidar_clouds[-1][0])
         self.lidar_clouds.append((stamp, self.lidar.last_cloud, np.asarray(scan.T_world_sensor, float)[:3, 3].copy()))
         # s: the voting's reach back and its scans (at 10 Hz), and a period to spare
         span = self.cfg.lidar.vote_span + 0.1 * (self.cfg.lidar.vote_scans + 1)
@@ -378,7 +380,7 @@ class DODT:
         t2 = time.perf_counter()
         for tr in self.tracker.tracks:
             tr.identify(seq, self.poses, self.clouds.get, frame.intrinsics, self.cfg.depth.depth_max, self.lidar_clouds,
-                        {k: (v[0], v[1].get, v[2]) for k, v in self.other_views.items()})
+                        {k: (v[0], v[1].get, v[2]) for k, v in self.other_views.items()}, self.tracker.lidar_clock)
         obstacles = self.motion((t.output(stamp) for t in self.tracker.tracks), frame)
         t3 = time.perf_counter()
         timings = {"point_cloud": t_cloud, **debug["timings"], "other_cameras": t_other, "lidar": t_lidar,

@@ -109,7 +109,7 @@ class Track:
         self._h0 = self._h1 = 0
         self.add_history(stamp, float(det.center[0]), float(det.center[1]), self.z)
         self.candidates: deque[bool] = deque()  # of the frames with a detection
-        self.dynamic_history: deque[bool] = deque()  # the geometric label of every frame
+        self.dynamic_history: deque[bool] = deque()  # the geometric label of every frame with a detection
         self.geometric_dynamic = False  # the label from speed and point voting alone
         # A person box from the learned detector makes the track a person (dynamic at once) only
         # when it recurs: person_fraction of its matched detections over person_span (ours; a
@@ -389,19 +389,19 @@ class Track:
         self.by_lidar = det.source == "lidar"
 
     def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float,
-                 lidar_clouds=(), other_cameras=None) -> None:
+                 lidar_clouds=(), other_cameras=None, lidar_clock: FrameClock | None = None) -> None:
         """clouds(seq) -> that frame's whole filtered cloud, or None. lidar_clouds: (stamp, filtered cloud,
         the scan's origin) of the recent LiDAR scans, oldest first (a track a LiDAR box updated votes against them).
         other_cameras: {sensor: (poses, clouds, K)} of the rig's other cameras (a track another camera
-        measured votes in that camera's view)."""
+        measured votes in that camera's view). lidar_clock: the LiDAR's scan period, which the force-dynamic
+        window of a track a LiDAR box updated is counted in (default: the camera's frame period)."""
         cfg = self.cfg.identification
         if self.coasting:
-            self._label(self.geometric_dynamic)
-            return  # no new points: the label stays
+            return  # no new points: the label stays, and enters no history (dodt.identification.decide)
         speed = float(np.linalg.norm(self.kf.velocity))
         cur_seq, cur_t, cur_pts = self.clouds[-1]
         if self.by_lidar:
-            self._identify_by_lidar(speed, cur_t, cur_pts, lidar_clouds)
+            self._identify_by_lidar(speed, cur_t, cur_pts, lidar_clouds, lidar_clock or self.clock)
             return
         # the cloud from k frames back (vote_span), or the oldest one kept since then
         k_back = self.clock.intervals(cfg.vote_span)
@@ -436,7 +436,8 @@ class Track:
         # for a while, stayed dynamic for 8 s after its last person box.
         self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))
 
-    def _identify_by_lidar(self, speed: float, now: float, points: np.ndarray, lidar_clouds) -> None:
+    def _identify_by_lidar(self, speed: float, now: float, points: np.ndarray, lidar_clouds,
+                           lidar_clock: FrameClock) -> None:
         """``identify`` for a track a LiDAR box updated: the same point voting, at ``lidar.vote_velocity``
         (dodt.config), against the union of the clouds of the ``lidar.vote_scans`` newest scans at least
         ``lidar.vote_span`` old (one scan's pattern leaves gaps of a few degrees that the next ones fill), the
@@ -461,21 +462,21 @@ class Track:
                 here = [o for t, _, o in lidar_clouds if abs(t - now) <= 1e-6]  # the scan that measured it
                 facing = faced_then(points, here[-1], [o for _, _, o in then], lc.face_cos) if here else None
                 votes, valid, skipped = vote(points, near, dt, v_box, None, None, 0.0, cfg, seen_then=facing)
-        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))
+        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg), lidar_clock)
 
-    def _decide(self, cand: bool) -> None:
-        """Add this frame's candidate test and label the track (dodt.identification.decide)."""
+    def _decide(self, cand: bool, lock_clock: FrameClock | None = None) -> None:
+        """Add this frame's candidate test and label the track (dodt.identification.decide); the
+        force-dynamic window counted at ``lock_clock``'s period (the measuring sensor's; default the camera's)."""
         cfg = self.cfg.identification
+        lock_clock = lock_clock or self.clock
         self.candidates.append(cand)
         keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
                                        self.clock.intervals(cfg.release_span) + 1))
-        self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg, self.clock)
-        self._label(self.geometric_dynamic)
-
-    def _label(self, dynamic: bool) -> None:
-        self.dynamic_history.append(dynamic)
-        span = self.cfg.identification.force_dynamic_span
-        keep_last(self.dynamic_history, 1 if span is None else self.clock.intervals(span) + 1)
+        self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg, self.clock,
+                                        lock_clock)
+        self.dynamic_history.append(self.geometric_dynamic)
+        span = cfg.force_dynamic_span
+        keep_last(self.dynamic_history, 1 if span is None else lock_clock.intervals(span) + 1)
 
     def camera_point(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """The predicted centre in the camera frame of pose (R, t)."""
@@ -516,6 +517,7 @@ class Tracker:
         self.tracks: list[Track] = []
         self._next_id = 1
         self.clock = FrameClock(cfg.reference_rate)
+        self.lidar_clock = FrameClock(cfg.reference_rate)  # the LiDAR's scan period (DODT observes it)
         self.restarts = 0  # tracks re-initialised after a jump (Track.jumped)
         self.walls: tuple[np.ndarray, np.ndarray] | None = None  # the geofence, (x, y) low and high
 

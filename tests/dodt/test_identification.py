@@ -171,24 +171,31 @@ def test_the_old_cloud_cropped_to_matching_reach_gives_the_same_vote():
         assert vote(now, near, dt, v, T_CAM, K, 5.0, CFG) == vote(now, cKDTree(cloud), dt, v, T_CAM, K, 5.0, CFG)
 
 
-def _slab_track_candidates(cfg, frame_points, velocity) -> list[bool]:
-    """Feed a track one detection per frame (30 Hz) of the given points, with its filtered
-    velocity held at ``velocity`` (past the velocity test: the votes decide); its candidates."""
+def measure_slab(cfg, track, clouds: dict, k: int, pts: np.ndarray, velocity):
+    """Frame k (30 Hz) of a track measured by one detection of ``pts`` (the first one makes the track),
+    its filtered velocity held at ``velocity`` (past the velocity test: the votes decide), identified;
+    ``clouds`` gathers the frames' clouds. Returns the track."""
     from dodt.detection import Detection
     from dodt.tracker import Track
 
     dt = 1 / 30
+    clouds[k] = pts
+    det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="dbscan", points=pts)
+    if track is None:
+        track = Track(1, det, k, k * dt, cfg)
+    else:
+        track.kf.predict(dt)
+        track.update(det, k, k * dt)
+    track.kf.x[2:4] = velocity
+    track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
+    return track
+
+
+def _slab_track_candidates(cfg, frame_points, velocity) -> list[bool]:
+    """Feed a track one detection per frame (30 Hz) of the given points (measure_slab); its candidates."""
     clouds, track, candidates = {}, None, []
     for k, pts in enumerate(frame_points):
-        clouds[k] = pts
-        det = Detection(center=pts.mean(axis=0), size=np.ptp(pts, axis=0) + 0.05, source="dbscan", points=pts)
-        if track is None:
-            track = Track(1, det, k, k * dt, cfg)
-        else:
-            track.kf.predict(dt)
-            track.update(det, k, k * dt)
-        track.kf.x[2:4] = velocity
-        track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
+        track = measure_slab(cfg, track, clouds, k, pts, velocity)
         candidates.append(track.candidates[-1])
     return candidates
 

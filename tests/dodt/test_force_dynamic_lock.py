@@ -1,0 +1,59 @@
+"""The force-dynamic lock (dodt.identification.decide) counts the frames that carried evidence: a
+coasting track's held label does not lock it, and a LiDAR track's window is counted in its scans."""
+import numpy as np
+
+from dodt.config import DODTConfig, IdentificationConfig
+from dodt.identification import decide
+from dodt.windows import FrameClock
+from tests.dodt.test_identification import K, T_CAM, frames_of, measure_slab, slab
+
+
+def _clock(rate: float) -> FrameClock:
+    clock = FrameClock()
+    for _ in range(3):
+        clock.observe(1.0 / rate)
+    return clock
+
+
+def test_the_lock_window_is_counted_at_the_measuring_sensors_period():
+    """At 10 Hz scans the window of 29/30 s holds 11 labels, a third of them dynamic locks; counted at the
+    camera's 30 Hz the same 11 scans (3.7 s of them at that rate's 30 frames) would not yet fill it."""
+    cfg = IdentificationConfig()
+    cam, scans = _clock(30.0), _clock(10.0)
+    w = frames_of(cfg.force_dynamic_span, 10.0)
+    assert w == 11
+    cand = [False] * 5  # nothing moving now: only the lock can keep it dynamic
+    locked = [False] * (w - 4) + [True] * 4
+    assert decide(cand, locked, cfg, cam, scans)
+    assert not decide(cand, [False] * (w - 3) + [True] * 3, cfg, cam, scans)
+    assert not decide(cand, locked, cfg, cam)  # at the camera's period: 30 labels needed
+
+
+def test_frames_coasted_through_do_not_lock_a_track_dynamic():
+    """A slab standing for half a second walks off at 1 m/s and is labelled dynamic, is missed for 12
+    frames (coasting, its label held), then stands still: three measured frames that are no candidates
+    release it. Counted, the held labels would have made over 10 of the last 30 frames dynamic and
+    locked it for good."""
+    cfg = DODTConfig()
+    dt = 1 / 30
+    clouds, track, labels = {}, None, []
+
+    def measure(k, pts, velocity):
+        nonlocal track
+        track = measure_slab(cfg, track, clouds, k, pts, velocity)
+        labels.append(track.geometric_dynamic)
+
+    for k in range(15):  # standing
+        measure(k, slab(3.0, 0.0, n=300, seed=k, width=0.15), [0.0, 0.0])
+    for k in range(15, 25):  # walking sideways
+        measure(k, slab(3.0, (k - 14) / 30, n=300, seed=k, width=0.15), [0.0, 1.0])
+    assert not any(labels[:15]) and labels[-1] and sum(labels) < 10
+    for k in range(25, 37):  # missed: the track coasts, its label held
+        track.kf.predict(dt)
+        track.coasting = True
+        track.identify(k, {j: T_CAM for j in clouds}, clouds.get, K, 5.0)
+        assert track.geometric_dynamic
+    for k in range(37, 41):  # seen again, standing
+        measure(k, slab(3.0, 0.4, n=300, seed=k, width=0.15), [0.0, 0.0])
+    r = frames_of(cfg.identification.release_span)
+    assert all(labels[25:25 + r - 1]) and not any(labels[25 + r - 1:])
