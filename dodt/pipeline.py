@@ -132,6 +132,7 @@ class DODT:
         self.motion = MotionLabel(self.cfg.motion)  # the last step of identification
         self.lidar = LidarDetector(self.cfg.lidar, self.cfg.voxel.ground_height, self.cfg.voxel.ceiling_height)
         self._scan = None  # the latest LiDAR scan not yet fused (observe_lidar)
+        self._fused_scan = None  # the scan fused into this frame's detections, if any
         self._others: tuple = ()  # the rig's other cameras' frames for the next frame (observe_cameras)
         # (frame stamp, LiDAR cloud, the scan's origin (3,)) to vote with
         self.lidar_clouds: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
@@ -150,7 +151,7 @@ class DODT:
     def reset(self) -> None:
         self.tracker.reset()
         self.motion.reset()
-        self._scan = None
+        self._scan = self._fused_scan = None
         self._others = ()
         self.lidar_clouds.clear()
         self.other_views.clear()
@@ -238,8 +239,10 @@ class DODT:
         """The kept scan's boxes whose footprints meet none of the camera's detections' (those are the
         camera's to measure); its filtered cloud joins ``lidar_clouds`` at ``stamp``."""
         scan, self._scan = self._scan, None
+        self._fused_scan = None
         if scan is None or not np.all(np.isfinite(scan.T_world_sensor)):
             return []
+        self._fused_scan = scan
         static_map, geofence, el_min = self._lidar_view
         out = []
         grow = self.cfg.lidar.voxel
@@ -374,6 +377,8 @@ class DODT:
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
         for d_k, K_k, T_k in other_views:
             self.tracker.drop_seen_through(d_k, K_k, T_k)
+        if self._fused_scan is not None:
+            self.tracker.drop_seen_through_lidar(self._fused_scan)
         boxes_2d = getattr(self.learned_detector, "last_boxes_2d", None)
         if boxes_2d is not None and frame.color is not None:
             self.tracker.drop_unseen_people(boxes_2d, depth_m, frame.intrinsics, T)

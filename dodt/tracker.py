@@ -28,7 +28,7 @@ from numba import njit
 from dodt.association import TrackView, assign, features, mean_columns, similarity_matrix
 from dodt.config import DODTConfig
 from dodt.detection import Detection
-from dodt.frames import CameraIntrinsics
+from dodt.frames import CameraIntrinsics, LidarScan
 from dodt.geometry import column_bounds, crop_to_box, wrap_angle
 from dodt.identification import decide, faced_then, is_candidate, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
@@ -565,6 +565,41 @@ class Tracker:
                         if n_valid >= 20 and n_behind / n_valid > tc.seen_through_fraction:
                             dropped += 1
                             continue
+            keep.append(tr)
+        self.tracks = keep
+        return dropped
+
+    def drop_seen_through_lidar(self, scan: LidarScan) -> int:
+        """drop_seen_through for a LiDAR scan: delete coasting tracks whose predicted box the scan's rays
+        pass through. Of the returns whose rays cross the middle of the box as seen from the sensor (0.6 of
+        its width and of its height, as the camera test reads 0.6 of its image region), at least 10, more
+        than ``track.seen_through_fraction`` end farther than the box's centre by
+        ``track.seen_through_margin`` (horizontally): the scan sees past where the obstacle should be, so
+        it is not there; occluded, something nearer is seen, and it keeps coasting. The whole scan is in
+        view (all round). Returns how many."""
+        tc = self.cfg.track
+        T = np.asarray(scan.T_world_sensor, dtype=np.float64)
+        if len(scan.ranges) == 0 or not np.all(np.isfinite(T)):
+            return 0
+        R, origin = T[:3, :3], T[:3, 3]
+        az = np.asarray(scan.azimuth, dtype=np.float64)
+        el = np.asarray(scan.elevation, dtype=np.float64)
+        reach = np.asarray(scan.ranges, dtype=np.float64) * np.cos(el)  # horizontal range of each return
+        keep, dropped = [], 0
+        for tr in self.tracks:
+            if tr.coasting and tr.missed >= self.clock.intervals(tc.seen_through_after):
+                q = R.T @ (tr.center - origin)  # the box's centre in the sensor frame
+                d = float(np.hypot(q[0], q[1]))
+                if d > tr.half_width:  # the sensor is not inside the box
+                    half_az = math.atan2(0.6 * tr.half_width, d)
+                    half_h = 0.6 * 0.5 * float(tr.size[2])
+                    off = np.abs(wrap_angle(az - math.atan2(q[1], q[0])))
+                    ray = (off <= half_az) & (el >= math.atan2(q[2] - half_h, d)) & (el <= math.atan2(q[2] + half_h, d))
+                    n_valid = int(np.count_nonzero(ray))
+                    if n_valid >= 10 and np.count_nonzero(reach[ray] > d + tc.seen_through_margin) > \
+                            tc.seen_through_fraction * n_valid:
+                        dropped += 1
+                        continue
             keep.append(tr)
         self.tracks = keep
         return dropped
