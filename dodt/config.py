@@ -164,8 +164,8 @@ class KalmanConfig:
 class TrackConfig:
     coast_time: float = 1.0  # s a track survives without detections on its prediction (beyond the paper)
     # a coasting track is dropped when, this long after its last detection, this fraction of its image
-    # region is seen this far behind where it should be (it is not there; ours). Checked sooner,
-    # the test drops people who only stepped off the prediction
+    # region (or of the LiDAR's returns through its box) is seen this far behind where it should be (it
+    # is not there; ours). Checked sooner, the test drops people who only stepped off the prediction
     seen_through_after: float = 7 / 30  # s: 7 missed frames at 30 Hz
     seen_through_fraction: float = 0.75
     seen_through_margin: float = 0.3  # m
@@ -236,7 +236,8 @@ class IdentificationConfig:
     # in a row at 30 Hz; None: at the first one, as the reference code does for a track younger than
     # the force-dynamic window, whose label then blinks with the vote)
     release_span: float | None = 2 / 30
-    # a track dynamic in at least this fraction of its frames over this span stays dynamic: ref
+    # a track dynamic in at least this fraction of its frames with a detection over this span (as many as
+    # it holds at the measuring sensor's rate: 30 camera frames, 11 scans at 10 Hz) stays dynamic: ref
     # frames_force_dynamic 10 of frames_force_dynamic_check_range 30 at 30 Hz
     force_dynamic_span: float | None = 29 / 30  # s; None: no force-dynamic lock
     force_dynamic_fraction: float = 1 / 3

@@ -11,8 +11,9 @@ Per track and frame, a candidate test:
    and the frame says nothing;
 3. candidate if votes / valid points >= T_ratio.
 A track is dynamic once every frame within the last ``consistency_span`` seconds was a candidate,
-and stays dynamic while at least ``force_dynamic_fraction`` of its frames with a detection over the
-last ``force_dynamic_span`` were dynamic (windows of time: dodt.windows). A
+and stays dynamic while at least ``force_dynamic_fraction`` of its last frames with a detection, as
+many as ``force_dynamic_span`` holds at the measuring sensor's rate, were dynamic (windows of time:
+dodt.windows; frames it coasted through hold its label and are not counted). A
 track flagged a person by a learned detector is dynamic at once, for as long as the flag lasts:
 the flag does not enter the candidates or that history (ours), so it cannot lock a standing
 obstacle dynamic.
@@ -175,25 +176,42 @@ def size_ok(size: np.ndarray, cfg: IdentificationConfig) -> bool:
     return bool(np.all(np.abs(np.asarray(size) - np.asarray(cfg.target_size)) <= cfg.target_size_tolerance))
 
 
-def decide(candidates: list[bool], dynamic_history: list[bool], cfg: IdentificationConfig,
+def decide(candidates: list[bool], dynamic_history, cfg: IdentificationConfig,
            clock: FrameClock | None = None, lock_clock: FrameClock | None = None) -> bool:
     """Consistency over frames, with the reference code's hysteresis, and ours: a dynamic track
     turns static only when no frame over ``release_span`` was a candidate.
 
-    candidates: of the frames with a detection, up to this one; dynamic_history: the labels of
-    the frames with a detection before this one (a coasting track's label is held, not evidence:
-    counted, the frames a dynamic track coasted through locked it). The spans are counted in frames
-    at ``clock``'s frame period (default: the reference rate), the force-dynamic window at
-    ``lock_clock``'s (default ``clock``): the period of the sensor that measures the track, a LiDAR's
-    scans for a track its boxes update."""
+    candidates: of the frames with a detection, up to this one; dynamic_history: (label, seconds) of
+    the frames with a detection before this one, oldest first: each frame's label and the time it
+    stands for, the period of the sensor that measured it (a coasting track's label is held, not
+    evidence: counted, the frames a dynamic track coasted through locked it). The spans are counted
+    in frames at ``clock``'s frame period (default: the reference rate). The force-dynamic lock reads
+    the newest labels that stand for its window, as many frames as ``force_dynamic_span`` holds at
+    ``lock_clock``'s period (the sensor that measures the track now, a LiDAR's scans for a track its
+    boxes update; default ``clock``): it locks once the history fills the window and the dynamic
+    labels stand for ``force_dynamic_fraction`` of it. At one rate that is the reference code's count
+    (10 of the last 30 frames at 30 Hz); a track measured by a camera and a LiDAR in turn counts
+    each label for its sensor's period."""
     clock = clock or FrameClock()
     n = clock.frames_within(cfg.consistency_span)
     if len(candidates) >= n and all(candidates[-n:]):
         return True
-    if cfg.release_span is not None and dynamic_history and dynamic_history[-1] and \
+    if cfg.release_span is not None and dynamic_history and dynamic_history[-1][0] and \
             any(candidates[-(clock.intervals(cfg.release_span) + 1):]):
         return True
     if cfg.force_dynamic_span is None:
         return False
-    w = (lock_clock or clock).intervals(cfg.force_dynamic_span) + 1
-    return len(dynamic_history) >= w and sum(dynamic_history[-w:]) >= cfg.force_dynamic_fraction * w - 1e-9
+    window = lock_window(cfg.force_dynamic_span, lock_clock or clock)
+    filled = dynamic = 0.0
+    for label, seconds in reversed(dynamic_history):
+        if filled >= window * (1.0 - 1e-9):
+            break
+        filled += seconds
+        dynamic += seconds if label else 0.0
+    return filled >= window * (1.0 - 1e-9) and dynamic >= cfg.force_dynamic_fraction * window * (1.0 - 1e-9)
+
+
+def lock_window(span: float, clock: FrameClock) -> float:
+    """The force-dynamic window [s]: as many frames as ``span`` holds at ``clock``'s period, each standing
+    for one period."""
+    return (clock.intervals(span) + 1) * clock.period

@@ -30,7 +30,7 @@ from dodt.config import DODTConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics, LidarScan
 from dodt.geometry import column_bounds, crop_to_box, wrap_angle
-from dodt.identification import decide, faced_then, is_candidate, match_reach, size_ok, vote
+from dodt.identification import decide, faced_then, is_candidate, lock_window, match_reach, size_ok, vote
 from dodt.kalman import KalmanFilter
 from dodt.learned.layout import iou_one
 from dodt.result import TrackedObstacle
@@ -109,7 +109,8 @@ class Track:
         self._h0 = self._h1 = 0
         self.add_history(stamp, float(det.center[0]), float(det.center[1]), self.z)
         self.candidates: deque[bool] = deque()  # of the frames with a detection
-        self.dynamic_history: deque[bool] = deque()  # the geometric label of every frame with a detection
+        # (the geometric label, the seconds it stands for) of every frame with a detection
+        self.dynamic_history: deque[tuple[bool, float]] = deque()
         self.geometric_dynamic = False  # the label from speed and point voting alone
         # A person box from the learned detector makes the track a person (dynamic at once) only
         # when it recurs: person_fraction of its matched detections over person_span (ours; a
@@ -466,7 +467,9 @@ class Track:
 
     def _decide(self, cand: bool, lock_clock: FrameClock | None = None) -> None:
         """Add this frame's candidate test and label the track (dodt.identification.decide); the
-        force-dynamic window counted at ``lock_clock``'s period (the measuring sensor's; default the camera's)."""
+        force-dynamic window counted at ``lock_clock``'s period (the measuring sensor's; default the camera's),
+        each label standing for the period of the sensor that measured it. The labels are kept for the
+        longer of the camera's and the LiDAR's windows: one history for a track both measure."""
         cfg = self.cfg.identification
         lock_clock = lock_clock or self.clock
         self.candidates.append(cand)
@@ -474,9 +477,15 @@ class Track:
                                        self.clock.intervals(cfg.release_span) + 1))
         self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg, self.clock,
                                         lock_clock)
-        self.dynamic_history.append(self.geometric_dynamic)
+        self.dynamic_history.append((self.geometric_dynamic, lock_clock.period))
         span = cfg.force_dynamic_span
-        keep_last(self.dynamic_history, 1 if span is None else lock_clock.intervals(span) + 1)
+        if span is None:
+            keep_last(self.dynamic_history, 1)
+            return
+        window = max(lock_window(span, lock_clock), lock_window(span, self.clock))
+        total = sum(sec for _, sec in self.dynamic_history)
+        while len(self.dynamic_history) > 1 and total - self.dynamic_history[0][1] >= window * (1.0 - 1e-9):
+            total -= self.dynamic_history.popleft()[1]
 
     def camera_point(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """The predicted centre in the camera frame of pose (R, t)."""
@@ -572,11 +581,12 @@ class Tracker:
     def drop_seen_through_lidar(self, scan: LidarScan) -> int:
         """drop_seen_through for a LiDAR scan: delete coasting tracks whose predicted box the scan's rays
         pass through. Of the returns whose rays cross the middle of the box as seen from the sensor (0.6 of
-        its width and of its height, as the camera test reads 0.6 of its image region), at least 10, more
+        its widest side and of its height), at least 10, more
         than ``track.seen_through_fraction`` end farther than the box's centre by
         ``track.seen_through_margin`` (horizontally): the scan sees past where the obstacle should be, so
         it is not there; occluded, something nearer is seen, and it keeps coasting. The whole scan is in
-        view (all round). Returns how many."""
+        view (all round). The window is taken in the sensor's frame from the box's world size, which
+        holds for a level sensor. Returns how many."""
         tc = self.cfg.track
         T = np.asarray(scan.T_world_sensor, dtype=np.float64)
         if len(scan.ranges) == 0 or not np.all(np.isfinite(T)):

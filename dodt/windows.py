@@ -7,7 +7,8 @@ at the reference code's 30 Hz a span given as n frames' worth (n - 1 intervals, 
 its 3 consecutive candidates) is those n frames again, at 5 Hz it is two. Frames a track was not
 detected in still count as intervals where the reference code counts them (the cloud voted
 against, the frames coasted); entries a track records only when detected (its observations,
-candidates, person votes) are counted as the reference code counts them.
+candidates, person votes, dynamic labels) are counted as the reference code counts them. A track a
+LiDAR measures counts its force-dynamic window at the LiDAR's scan period (DODT keeps a second clock).
 
 Two ways to count: ``intervals`` (back to the newest frame at least the span old: two frames at
 any rate, for evidence that must recur, such as a person box or the frames a dynamic track must

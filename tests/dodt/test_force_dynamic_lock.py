@@ -17,16 +17,30 @@ def _clock(rate: float) -> FrameClock:
 
 def test_the_lock_window_is_counted_at_the_measuring_sensors_period():
     """At 10 Hz scans the window of 29/30 s holds 11 labels, a third of them dynamic locks; counted at the
-    camera's 30 Hz the same 11 scans (3.7 s of them at that rate's 30 frames) would not yet fill it."""
+    camera's 30 Hz the window holds 30 labels, which 11 scans' worth of camera frames do not fill. A track
+    both sensors measured counts each label for its sensor's period: 15 camera frames dynamic (0.5 s)
+    and 6 static scans (0.6 s) fill the LiDAR's 1.1 s window, a third of it dynamic."""
     cfg = IdentificationConfig()
     cam, scans = _clock(30.0), _clock(10.0)
     w = frames_of(cfg.force_dynamic_span, 10.0)
     assert w == 11
     cand = [False] * 5  # nothing moving now: only the lock can keep it dynamic
+
+    def by_scans(labels):
+        return [(x, scans.period) for x in labels]
+
     locked = [False] * (w - 4) + [True] * 4
-    assert decide(cand, locked, cfg, cam, scans)
-    assert not decide(cand, [False] * (w - 3) + [True] * 3, cfg, cam, scans)
-    assert not decide(cand, locked, cfg, cam)  # at the camera's period: 30 labels needed
+    assert decide(cand, by_scans(locked), cfg, cam, scans)
+    assert not decide(cand, by_scans([False] * (w - 3) + [True] * 3), cfg, cam, scans)
+    assert not decide(cand, by_scans(locked)[:-1], cfg, cam, scans)  # 1.0 s: the window is not filled
+    assert not decide(cand, [(x, cam.period) for x in locked], cfg, cam)  # at the camera's period: 30 labels
+    mixed = [(True, cam.period)] * 15 + [(False, scans.period)] * 6
+    assert decide(cand, mixed, cfg, cam, scans)
+    # the window filled, 10 camera frames (0.33 s) dynamic in it: under a third
+    assert not decide(cand, [(False, cam.period)] * 15 + [(True, cam.period)] * 10 + [(False, scans.period)] * 7,
+                      cfg, cam, scans)
+    assert decide(cand, [(False, cam.period)] * 15 + [(True, cam.period)] * 11 + [(False, scans.period)] * 7,
+                  cfg, cam, scans)
 
 
 def test_frames_coasted_through_do_not_lock_a_track_dynamic():

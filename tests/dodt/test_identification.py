@@ -103,7 +103,7 @@ def decide_at(candidates: list[bool], history: list[bool], cfg=CFG, rate: float 
     clock = FrameClock()
     for _ in range(3):
         clock.observe(1.0 / rate)
-    return decide(candidates, history, cfg, clock)
+    return decide(candidates, [(h, clock.period) for h in history], cfg, clock)
 
 
 def test_consistency_and_hysteresis():

@@ -52,7 +52,9 @@ def there(a, e):
     (wall, 0.0, True),  # the rays through its place end on the wall behind: not there
     (wall, 2.0, True),  # the same from a turned sensor
     (occluder, 0.0, False),  # something nearer covers its place: it may be behind it
+    (occluder, 2.0, False),  # the same from a turned sensor (its rays read in the sensor's frame)
     (there, 0.0, False),  # returns where it should be
+    (there, -1.0, False),
     (lambda a, e: None, 0.0, False),  # no returns: nothing to tell
 ])
 def test_a_coasting_track_the_scan_sees_through_is_dropped(surface, yaw, dropped):
