@@ -469,7 +469,7 @@ class Track:
         """Add this frame's candidate test and label the track (dodt.identification.decide); the
         force-dynamic window counted at ``lock_clock``'s period (the measuring sensor's; default the camera's),
         each label standing for the period of the sensor that measured it. The labels are kept for the
-        longer of the camera's and the LiDAR's windows: one history for a track both measure."""
+        longer of the camera's window and the measuring sensor's: one history for a track both measure."""
         cfg = self.cfg.identification
         lock_clock = lock_clock or self.clock
         self.candidates.append(cand)
