@@ -109,8 +109,9 @@ class Track:
         self._h0 = self._h1 = 0
         self.add_history(stamp, float(det.center[0]), float(det.center[1]), self.z)
         self.candidates: deque[bool] = deque()  # of the frames with a detection
-        # (the geometric label, the seconds it stands for) of every frame with a detection
-        self.dynamic_history: deque[tuple[bool, float]] = deque()
+        # (the geometric label, which sensor measured it: 0 a camera, 1 the LiDAR) of every frame with a
+        # detection; a label stands for that sensor's frame period (_decide)
+        self.dynamic_history: deque[tuple[bool, int]] = deque()
         self.geometric_dynamic = False  # the label from speed and point voting alone
         # A person box from the learned detector makes the track a person (dynamic at once) only
         # when it recurs: person_fraction of its matched detections over person_span (ours; a
@@ -435,7 +436,7 @@ class Track:
         # into it, ten person frames locked a static obstacle dynamic for good (force_dynamic):
         # on circles a 3 m tall obstacle 5 m away, mutual best match of a passing person's box
         # for a while, stayed dynamic for 8 s after its last person box.
-        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg))
+        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg), lidar_clock)
 
     def _identify_by_lidar(self, speed: float, now: float, points: np.ndarray, lidar_clouds,
                            lidar_clock: FrameClock) -> None:
@@ -463,29 +464,32 @@ class Track:
                 here = [o for t, _, o in lidar_clouds if abs(t - now) <= 1e-6]  # the scan that measured it
                 facing = faced_then(points, here[-1], [o for _, _, o in then], lc.face_cos) if here else None
                 votes, valid, skipped = vote(points, near, dt, v_box, None, None, 0.0, cfg, seen_then=facing)
-        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg), lidar_clock)
+        self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg), lidar_clock,
+                     by_lidar=True)
 
-    def _decide(self, cand: bool, lock_clock: FrameClock | None = None) -> None:
-        """Add this frame's candidate test and label the track (dodt.identification.decide); the
-        force-dynamic window counted at ``lock_clock``'s period (the measuring sensor's; default the camera's),
-        each label standing for the period of the sensor that measured it. The labels are kept for the
-        longer of the camera's window and the measuring sensor's: one history for a track both measure."""
+    def _decide(self, cand: bool, lidar_clock: FrameClock | None = None, by_lidar: bool = False) -> None:
+        """Add this frame's candidate test and label the track (dodt.identification.decide). Each label of
+        the force-dynamic history stands for the frame period of the sensor that measured it, the camera's
+        (``self.clock``) or the LiDAR's (``lidar_clock``, default the camera's), as each clock has it now;
+        the window is the measuring sensor's. The labels are kept for the longer of the camera's window and
+        the LiDAR's: one history for a track both measure."""
         cfg = self.cfg.identification
-        lock_clock = lock_clock or self.clock
+        lidar_clock = lidar_clock or self.clock
+        periods = (self.clock.period, lidar_clock.period)
         self.candidates.append(cand)
         keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
                                        self.clock.intervals(cfg.release_span) + 1))
-        self.geometric_dynamic = decide(list(self.candidates), list(self.dynamic_history), cfg, self.clock,
-                                        lock_clock)
-        self.dynamic_history.append((self.geometric_dynamic, lock_clock.period))
+        self.geometric_dynamic = decide(list(self.candidates), [(x, periods[k]) for x, k in self.dynamic_history],
+                                        cfg, self.clock, lidar_clock if by_lidar else self.clock)
+        self.dynamic_history.append((self.geometric_dynamic, int(by_lidar)))
         span = cfg.force_dynamic_span
         if span is None:
             keep_last(self.dynamic_history, 1)
             return
-        window = max(lock_window(span, lock_clock), lock_window(span, self.clock))
-        total = sum(sec for _, sec in self.dynamic_history)
-        while len(self.dynamic_history) > 1 and total - self.dynamic_history[0][1] >= window * (1.0 - 1e-9):
-            total -= self.dynamic_history.popleft()[1]
+        window = max(lock_window(span, lidar_clock), lock_window(span, self.clock))
+        total = sum(periods[k] for _, k in self.dynamic_history)
+        while len(self.dynamic_history) > 1 and total - periods[self.dynamic_history[0][1]] >= window * (1.0 - 1e-9):
+            total -= periods[self.dynamic_history.popleft()[1]]
 
     def camera_point(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """The predicted centre in the camera frame of pose (R, t)."""
