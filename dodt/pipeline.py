@@ -36,7 +36,7 @@ from dodt.config import DODTConfig
 from dodt.dbscan import DBSCANDetector
 from dodt.detection import Detection
 from dodt.ensemble import ensemble
-from dodt.frames import SensorFrame
+from dodt.frames import LidarScan, SensorFrame
 from dodt.geometry import box_cut_by_view_side, complete_hidden_depth, points_in_box
 from dodt.lidar_detector import LidarDetector
 from dodt.motion_label import MotionLabel
@@ -132,7 +132,6 @@ class DODT:
         self.motion = MotionLabel(self.cfg.motion)  # the last step of identification
         self.lidar = LidarDetector(self.cfg.lidar, self.cfg.voxel.ground_height, self.cfg.voxel.ceiling_height)
         self._scan = None  # the latest LiDAR scan not yet fused (observe_lidar)
-        self._fused_scan = None  # the scan fused into this frame's detections, if any
         self._others: tuple = ()  # the rig's other cameras' frames for the next frame (observe_cameras)
         # (frame stamp, LiDAR cloud, the scan's origin (3,)) to vote with
         self.lidar_clouds: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
@@ -151,7 +150,7 @@ class DODT:
     def reset(self) -> None:
         self.tracker.reset()
         self.motion.reset()
-        self._scan = self._fused_scan = None
+        self._scan = None
         self._others = ()
         self.lidar_clouds.clear()
         self.other_views.clear()
@@ -235,14 +234,13 @@ class DODT:
             views.append((depth_m, f.intrinsics, T))
         return out, views
 
-    def _lidar_detections(self, dets: list[Detection], stamp: float) -> list[Detection]:
+    def _lidar_detections(self, dets: list[Detection], stamp: float) -> tuple[list[Detection], LidarScan | None]:
         """The kept scan's boxes whose footprints meet none of the camera's detections' (those are the
-        camera's to measure); its filtered cloud joins ``lidar_clouds`` at ``stamp``."""
+        camera's to measure), and the scan fused (None: none this frame); its filtered cloud joins
+        ``lidar_clouds`` at ``stamp``."""
         scan, self._scan = self._scan, None
-        self._fused_scan = None
         if scan is None or not np.all(np.isfinite(scan.T_world_sensor)):
-            return []
-        self._fused_scan = scan
+            return [], None
         static_map, geofence, el_min = self._lidar_view
         out = []
         grow = self.cfg.lidar.voxel
@@ -257,7 +255,7 @@ class DODT:
         for d in found:
             if not any(_footprints_meet(d, c, grow) for c in dets):
                 out.append(d)
-        return out
+        return out, scan
 
     def _depth_detections(self, frame, depth_m, T, points) -> list[Detection]:
         """The depth detectors' ensemble on another camera's frame (``_detect``'s, without the learned
@@ -364,7 +362,7 @@ class DODT:
         other_dets, other_views = self._other_cameras(dets, seq) if self._others else ([], [])
         t_other = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
-        lidar_dets = self._lidar_detections(dets + other_dets, stamp)
+        lidar_dets, scan = self._lidar_detections(dets + other_dets, stamp)
         dets = dets + other_dets + lidar_dets
         t_lidar = (time.perf_counter() - t0) * 1e3
 
@@ -377,8 +375,8 @@ class DODT:
         self.tracker.drop_seen_through(depth_m, frame.intrinsics, T)
         for d_k, K_k, T_k in other_views:
             self.tracker.drop_seen_through(d_k, K_k, T_k)
-        if self._fused_scan is not None:
-            self.tracker.drop_seen_through_lidar(self._fused_scan)
+        if scan is not None:
+            self.tracker.drop_seen_through_lidar(scan)
         boxes_2d = getattr(self.learned_detector, "last_boxes_2d", None)
         if boxes_2d is not None and frame.color is not None:
             self.tracker.drop_unseen_people(boxes_2d, depth_m, frame.intrinsics, T)

@@ -546,6 +546,15 @@ class Tracker:
             t.kf.predict(dt, q_scale)
             t.bound_prediction(dt)
 
+    def _drop_seen_through(self, seen_past) -> int:
+        """Delete the coasting tracks due for a seen-through test (``track.seen_through_after`` since their
+        last detection) that ``seen_past(track)`` finds seen through. Returns how many."""
+        due = self.clock.intervals(self.cfg.track.seen_through_after)
+        keep = [tr for tr in self.tracks if not (tr.coasting and tr.missed >= due and seen_past(tr))]
+        dropped = len(self.tracks) - len(keep)
+        self.tracks = keep
+        return dropped
+
     def drop_seen_through(self, depth_m: np.ndarray, K: CameraIntrinsics, T_world_camera: np.ndarray) -> int:
         """Delete coasting tracks whose predicted place is in view and seen through: the camera
         sees clearly farther than where the obstacle should be, so it is not there (it is
@@ -557,30 +566,26 @@ class Tracker:
         square of the depth, as stereo depth noise does."""
         tc, dc = self.cfg.track, self.cfg.depth
         R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
-        keep, dropped = [], 0
         H, W = depth_m.shape
         person_reach = max(self.cfg.learned.depth_max, dc.depth_max) if self.cfg.learned.enabled else dc.depth_max
-        for tr in self.tracks:
-            if tr.coasting and tr.missed >= self.clock.intervals(tc.seen_through_after):
-                pc = tr.camera_point(R, t)
-                reach = person_reach if tr.is_person else dc.depth_max
-                if dc.depth_min <= pc[2] <= reach:
-                    margin = tc.seen_through_margin * max(1.0, (pc[2] / dc.depth_max) ** 2)
-                    u, v, half_w, half_h = tr.image_box(pc, K)
-                    u0, u1 = int(max(u - half_w, 0)), int(min(u + half_w, W - 1))
-                    v0, v1 = int(max(v - half_h, 0)), int(min(v + half_h, H - 1))
-                    inside = (u1 - u0) >= 0.6 * 2 * half_w and (v1 - v0) >= 0.6 * 2 * half_h
-                    if inside and u1 > u0 and v1 > v0:
-                        # of the valid depths (> 0) in every other pixel of the box's image region,
-                        # how many lie behind it (farther than its centre by the margin)
-                        n_valid, n_behind = _count_behind(depth_m, v0, v1 + 1, u0, u1 + 1, 2, pc[2] + margin)
-                        # seen through: nearly everything in the box's image region lies behind it
-                        if n_valid >= 20 and n_behind / n_valid > tc.seen_through_fraction:
-                            dropped += 1
-                            continue
-            keep.append(tr)
-        self.tracks = keep
-        return dropped
+
+        def seen_past(tr: Track) -> bool:
+            pc = tr.camera_point(R, t)
+            if not dc.depth_min <= pc[2] <= (person_reach if tr.is_person else dc.depth_max):
+                return False
+            margin = tc.seen_through_margin * max(1.0, (pc[2] / dc.depth_max) ** 2)
+            u, v, half_w, half_h = tr.image_box(pc, K)
+            u0, u1 = int(max(u - half_w, 0)), int(min(u + half_w, W - 1))
+            v0, v1 = int(max(v - half_h, 0)), int(min(v + half_h, H - 1))
+            inside = (u1 - u0) >= 0.6 * 2 * half_w and (v1 - v0) >= 0.6 * 2 * half_h
+            if not (inside and u1 > u0 and v1 > v0):
+                return False
+            # of the valid depths (> 0) in every other pixel of the box's image region, how many lie
+            # behind it (farther than its centre by the margin); seen through: nearly all of them
+            n_valid, n_behind = _count_behind(depth_m, v0, v1 + 1, u0, u1 + 1, 2, pc[2] + margin)
+            return n_valid >= 20 and n_behind / n_valid > tc.seen_through_fraction
+
+        return self._drop_seen_through(seen_past)
 
     def drop_seen_through_lidar(self, scan: LidarScan) -> int:
         """drop_seen_through for a LiDAR scan: delete coasting tracks whose predicted box the scan's rays
@@ -599,24 +604,21 @@ class Tracker:
         az = np.asarray(scan.azimuth, dtype=np.float64)
         el = np.asarray(scan.elevation, dtype=np.float64)
         reach = np.asarray(scan.ranges, dtype=np.float64) * np.cos(el)  # horizontal range of each return
-        keep, dropped = [], 0
-        for tr in self.tracks:
-            if tr.coasting and tr.missed >= self.clock.intervals(tc.seen_through_after):
-                q = R.T @ (tr.center - origin)  # the box's centre in the sensor frame
-                d = float(np.hypot(q[0], q[1]))
-                if d > tr.half_width:  # the sensor is not inside the box
-                    half_az = math.atan2(0.6 * tr.half_width, d)
-                    half_h = 0.6 * 0.5 * float(tr.size[2])
-                    off = np.abs(wrap_angle(az - math.atan2(q[1], q[0])))
-                    ray = (off <= half_az) & (el >= math.atan2(q[2] - half_h, d)) & (el <= math.atan2(q[2] + half_h, d))
-                    n_valid = int(np.count_nonzero(ray))
-                    if n_valid >= 10 and np.count_nonzero(reach[ray] > d + tc.seen_through_margin) > \
-                            tc.seen_through_fraction * n_valid:
-                        dropped += 1
-                        continue
-            keep.append(tr)
-        self.tracks = keep
-        return dropped
+
+        def seen_past(tr: Track) -> bool:
+            q = R.T @ (tr.center - origin)  # the box's centre in the sensor frame
+            d = float(np.hypot(q[0], q[1]))
+            if d <= tr.half_width:  # the sensor is inside the box
+                return False
+            half_az = math.atan2(0.6 * tr.half_width, d)
+            half_h = 0.6 * 0.5 * float(tr.size[2])
+            off = np.abs(wrap_angle(az - math.atan2(q[1], q[0])))
+            ray = (off <= half_az) & (el >= math.atan2(q[2] - half_h, d)) & (el <= math.atan2(q[2] + half_h, d))
+            n_valid = int(np.count_nonzero(ray))
+            return n_valid >= 10 and np.count_nonzero(reach[ray] > d + tc.seen_through_margin) > \
+                tc.seen_through_fraction * n_valid
+
+        return self._drop_seen_through(seen_past)
 
     def drop_unseen_people(self, boxes_2d: np.ndarray, depth_m: np.ndarray, K: CameraIntrinsics,
                            T_world_camera: np.ndarray) -> int:
