@@ -302,6 +302,7 @@ _VERTEX_SHADER = """
 #version 330
 uniform sampler2D parts;  // per part: 4 texels of its MVP's columns, then (light in its frame, body id)
 uniform float ambient;
+uniform int row0;  // the first part's row: several views' parts are stacked in one texture
 in vec3 in_pos;
 in vec3 in_normal;
 in vec4 in_color;
@@ -309,9 +310,9 @@ in int in_part;
 out vec3 v_color;
 flat out int v_body;
 void main() {
-    mat4 mvp = mat4(texelFetch(parts, ivec2(0, in_part), 0), texelFetch(parts, ivec2(1, in_part), 0),
-                    texelFetch(parts, ivec2(2, in_part), 0), texelFetch(parts, ivec2(3, in_part), 0));
-    vec4 light = texelFetch(parts, ivec2(4, in_part), 0);
+    mat4 mvp = mat4(texelFetch(parts, ivec2(0, in_part + row0), 0), texelFetch(parts, ivec2(1, in_part + row0), 0),
+                    texelFetch(parts, ivec2(2, in_part + row0), 0), texelFetch(parts, ivec2(3, in_part + row0), 0));
+    vec4 light = texelFetch(parts, ivec2(4, in_part + row0), 0);
     gl_Position = mvp * vec4(in_pos, 1.0);
     v_color = in_color.rgb * (ambient + (1.0 - ambient) * max(dot(in_normal, light.xyz), 0.0));
     v_body = int(light.w);
@@ -454,6 +455,7 @@ class GLRenderer:
         self._clear_color = self._track(ctx.framebuffer([self._color_rb], self._depth_rb))
         self._clear_seg = self._track(ctx.framebuffer([self._seg_rb]))
         self._passes = {}
+        self._views_targets = {}  # views -> (their parts' texture, one depth framebuffer side by side): lazily
         for name, fs in _FRAGMENT_SHADERS.items():
             prog = self._track(ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=fs))
             prog["parts"].value = 0
@@ -523,19 +525,50 @@ class GLRenderer:
 
     def render_depth_views(self, T_world_cameras) -> np.ndarray:
         """Depth buffers (V, H, W) float32 in [0, 1] seen from V optical-frame camera poses, the scene's poses
-        read from the client once: what ``render(T, color=False)`` gives for each pose, at less cost."""
+        read from the client once: what ``render(T, color=False)`` gives for each pose, at less cost. The views
+        are drawn side by side into one framebuffer and read back at once; where the rasteriser rounds a view's
+        offset differently, a few pixels differ from ``render``'s by a step of the depth buffer."""
         if not self._passes:
             raise RuntimeError("this GL renderer was released")
+        V, H, W = len(T_world_cameras), self.K.height, self.K.width
         poses = self._part_poses()
-        data = self._part_data
-        out = np.empty((len(T_world_cameras), self.K.height, self.K.width), dtype=np.float32)
+        data = np.zeros((V, len(self.parts), 5, 4), dtype="<f4")  # view k's parts from row k * parts
+        for k, T_world_camera in enumerate(T_world_cameras):
+            PV = self._P @ np.array(view_matrix(T_world_camera)).reshape(4, 4).T
+            for i, T in enumerate(poses):
+                data[k, i, :4, :] = (PV @ T).T  # columns of the MVP, as ``render`` computes them
+        zbuf = np.empty((H, V * W), dtype=np.float32)
         with _Current():
-            for k, T_world_camera in enumerate(T_world_cameras):
-                PV = self._P @ np.array(view_matrix(T_world_camera)).reshape(4, 4).T
-                for i, T in enumerate(poses):
-                    data[i, :4, :] = (PV @ T).T  # columns of the MVP
-                out[k] = self._draw(data, "depth", False, False)[1]
-        return out
+            # every view drawn into its own part of one framebuffer, then read back at once: one wait for the
+            # rasteriser instead of one per view
+            if V not in self._views_targets:
+                tex = self._track(self.ctx.texture((5, V * len(self.parts)), 4, dtype="f4"))
+                tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+                fbo = self._track(self.ctx.framebuffer([], self._track(self.ctx.depth_renderbuffer((V * W, H)))))
+                self._views_targets[V] = (tex, fbo)
+            tex, fbo = self._views_targets[V]
+            tex.write(data.tobytes())
+            vao, _ = self._passes["depth"]
+            ctx = self.ctx
+            ctx.enable_only(ctx.DEPTH_TEST | ctx.CULL_FACE)
+            ctx.front_face = "cw"
+            ctx.cull_face = "back"
+            fbo.use()
+            fbo.viewport = (0, 0, V * W, H)
+            fbo.clear(depth=1.0)
+            tex.use(location=0)
+            row0 = vao.program["row0"]
+            for k in range(V):
+                fbo.viewport = (k * W, 0, W, H)
+                row0.value = k * len(self.parts)
+                vao.render()
+            row0.value = 0
+            fbo.read_into(zbuf, components=1, attachment=-1, dtype="f4", viewport=(0, 0, V * W, H))
+        if self.depth_bits == 16:  # onto PyBullet's grid: k / 65535
+            zbuf *= np.float32(65535.0)
+            np.rint(zbuf, out=zbuf)
+            zbuf *= np.float32(1.0 / 65535.0)
+        return np.ascontiguousarray(zbuf.reshape(H, V, W).transpose(1, 0, 2))
 
     def _draw(self, data: np.ndarray, name: str, color: bool, segmentation: bool):
         self._tex.write(data.tobytes())

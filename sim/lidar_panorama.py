@@ -147,12 +147,18 @@ def _lookup(zbuf, dirs, R_views, R_world, fx, fy, cx, cy, near, far, reach, tol)
     H, W = zbuf.shape[1], zbuf.shape[2]
     out = np.full(n, np.inf)
     normal = np.zeros((n, 3))
-    step = 2.0 * math.pi / n_views
     w = np.empty(4)
-    pts = np.empty((4, 3))
     c = np.empty(3)
+    # the inverse depth of a buffer value d is w_near - w_slope * d (0 at the far plane)
+    w_near, w_slope = 1.0 / near, (far - near) / (far * near)
+    background = np.float32(1.0 - 1e-6)
     for i in range(n):
-        k = int(math.floor(math.atan2(dirs[i, 1], dirs[i, 0]) / step + 0.5)) % n_views
+        # the view whose axis is nearest the ray's azimuth (their optical z axes lie in the sensor's xy plane)
+        k, best = 0, -np.inf
+        for j in range(n_views):
+            dot = R_views[j, 0, 2] * dirs[i, 0] + R_views[j, 1, 2] * dirs[i, 1]
+            if dot > best:
+                k, best = j, dot
         R = R_views[k]
         X = R[0, 0] * dirs[i, 0] + R[1, 0] * dirs[i, 1] + R[2, 0] * dirs[i, 2]  # the ray in the view's frame
         Y = R[0, 1] * dirs[i, 0] + R[1, 1] * dirs[i, 1] + R[2, 1] * dirs[i, 2]
@@ -168,21 +174,18 @@ def _lookup(zbuf, dirs, R_views, R_world, fx, fy, cx, cy, near, far, reach, tol)
         img = zbuf[k]
         ok = True
         for j in range(4):
-            uj, vj = u0 + (j & 1), v0 + (j >> 1)
-            w[j] = _inverse_depth(img, uj, vj, near, far)
+            d = img[v0 + (j >> 1), u0 + (j & 1)]
+            w[j] = 0.0 if d >= background else w_near - w_slope * d
             ok = ok and w[j] > 0.0
-            z = 1.0 / w[j] if w[j] > 0.0 else 0.0
-            pts[j, 0] = (uj - cx) / fx * z
-            pts[j, 1] = (vj - cy) / fy * z
-            pts[j, 2] = z
         if ok:  # one plane: the inverse depth is affine in the image, so w00 + w11 = w01 + w10
             ok = abs(w[0] + w[3] - w[1] - w[2]) <= tol * max(w[0], w[1], w[2], w[3])
         if ok:
             wi = (1 - fv) * ((1 - fu) * w[0] + fu * w[1]) + fv * ((1 - fu) * w[2] + fu * w[3])
-            # the normal of the four points' diagonals
-            a0, a1, a2 = pts[3, 0] - pts[0, 0], pts[3, 1] - pts[0, 1], pts[3, 2] - pts[0, 2]
-            b0, b1, b2 = pts[1, 0] - pts[2, 0], pts[1, 1] - pts[2, 1], pts[1, 2] - pts[2, 2]
-            c[0], c[1], c[2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+            # the plane's normal: with 1/z = w0 + a (u - u0) + b (v - v0) and u = fx x / z + cx, v = fy y / z + cy,
+            # its points (x, y, z) satisfy (a fx, b fy, w0 + a (cx - u0) + b (cy - v0)) . (x, y, z) = 1
+            a = 0.5 * (w[1] - w[0] + w[3] - w[2])
+            b = 0.5 * (w[2] - w[0] + w[3] - w[1])
+            c[0], c[1], c[2] = a * fx, b * fy, w[0] + a * (cx - u0) + b * (cy - v0)
             norm = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
             c /= norm
         else:  # an edge or the background: the nearest pixel alone, the normal of its own surface

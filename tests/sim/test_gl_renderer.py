@@ -180,7 +180,11 @@ def test_several_depth_views_at_once_are_the_views_one_by_one():
     views = w._gl.render_depth_views(poses)
     assert views.shape == (2, w.intrinsics.height, w.intrinsics.width)
     for T, view in zip(poses, views):
-        np.testing.assert_array_equal(view, w._gl.render(T, color=False)[1])
+        # drawn side by side in one framebuffer: the rasteriser's rounding of a view's offset may move a
+        # few pixels by a step of the depth buffer, no more
+        one = w._gl.render(T, color=False)[1]
+        np.testing.assert_allclose(view, one, rtol=0, atol=5e-5)
+        assert np.mean(view == one) >= 0.99
     assert not np.array_equal(views[0], views[1])
     w.close()
 
