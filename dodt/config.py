@@ -440,6 +440,14 @@ class LidarDetectorConfig:
     # A static obstacle the sensor passes shows new faces, whose points find the old faces' within reach
     # and would vote moving. None: every point votes
     face_cos: float | None = -0.1
+    # ours: a point votes only if it lay this far inside what the scans voted against kept (the detector's
+    # range, above their lowest ray; dodt.identification.in_lidar_field), and a frame votes only when
+    # at least min_field_share of its points did (otherwise its label stays): what the sensor passed
+    # close by was under its lowest ray, and comes into its field as it moves away. A walker beside the
+    # sensor keeps its upper body in the field while its legs come into it: the share keeps its vote,
+    # the margin its legs out of it
+    field_margin: float = 0.1  # m
+    min_field_share: float = 0.5
 
 
 @dataclass(frozen=True)

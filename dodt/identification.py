@@ -20,6 +20,8 @@ obstacle dynamic.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
@@ -158,6 +160,40 @@ def faced_then(points: np.ndarray, origin_now, origins_then, cos_min: float | No
         cos = np.einsum("ni,ni->n", normal, to_then) / np.maximum(np.linalg.norm(to_then, axis=1), 1e-9)
         faced |= cos >= cos_min
     return faced
+
+
+class LidarCloud(NamedTuple):
+    """One LiDAR scan's filtered cloud as the vote reads it back: the frame stamp it was fused at, the
+    detector's filtered world points (dodt.lidar_detector), the scan's pose, and its lowest ray's
+    elevation [rad] in the sensor frame (None: not known)."""
+
+    stamp: float
+    points: np.ndarray
+    T_world_sensor: np.ndarray
+    elevation_min: float | None
+
+    @property
+    def origin(self) -> np.ndarray:
+        return self.T_world_sensor[:3, 3]
+
+
+def in_lidar_field(points: np.ndarray, scans, max_range: float, min_range: float, margin: float) -> np.ndarray:
+    """(n,) bool: whether each point lay, by ``margin`` m, inside the filtered cloud's reach of at least one
+    of ``scans`` (LidarCloud): horizontally within ``max_range`` and at least ``min_range`` from the
+    sensor (the detector's crop), and above the scan's lowest ray. A static box the sensor passes close
+    by is below its lowest ray (-7 deg: 0.2 m under the sensor at 1.6 m) until the sensor is past it; what
+    comes into the field from there was not in the cloud back then, and would vote moving."""
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    inside = np.zeros(len(P), bool)
+    for s in scans:
+        T = np.asarray(s.T_world_sensor, dtype=np.float64)
+        d = P - T[:3, 3]
+        ok = (np.hypot(d[:, 0], d[:, 1]) <= max_range - margin) & (np.linalg.norm(d, axis=1) >= min_range + margin)
+        if s.elevation_min is not None:
+            q = d @ T[:3, :3]  # the sensor frame
+            ok &= q[:, 2] - np.hypot(q[:, 0], q[:, 1]) * np.tan(s.elevation_min) >= margin
+        inside |= ok
+    return inside
 
 
 def is_candidate(speed: float, votes: int, valid: int, skipped: int, cfg: IdentificationConfig) -> bool:

@@ -38,6 +38,7 @@ from dodt.detection import Detection
 from dodt.ensemble import ensemble
 from dodt.frames import LidarScan, SensorFrame
 from dodt.geometry import box_cut_by_view_side, complete_hidden_depth, points_in_box
+from dodt.identification import LidarCloud
 from dodt.lidar_detector import LidarDetector
 from dodt.motion_label import MotionLabel
 from dodt.pointcloud import VoxelCloud
@@ -133,8 +134,8 @@ class DODT:
         self.lidar = LidarDetector(self.cfg.lidar, self.cfg.voxel.ground_height, self.cfg.voxel.ceiling_height)
         self._scan = None  # the latest LiDAR scan not yet fused (observe_lidar)
         self._others: tuple = ()  # the rig's other cameras' frames for the next frame (observe_cameras)
-        # (frame stamp, LiDAR cloud, the scan's origin (3,)) to vote with
-        self.lidar_clouds: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
+        # the recent scans' filtered clouds, to vote with
+        self.lidar_clouds: deque[LidarCloud] = deque()
         # the rig's other cameras' poses and clouds by frame seq, to vote with: {sensor: (poses, clouds, K)}
         self.other_views: dict[str, tuple[dict, dict, object]] = {}
         self._lidar_view = (None, None, None)  # (static map, geofence, lowest ray's elevation): set_scene
@@ -246,11 +247,11 @@ class DODT:
         grow = self.cfg.lidar.voxel
         found = self.lidar(scan, static_map, geofence, el_min)
         if self.lidar_clouds:
-            self.tracker.lidar_clock.observe(stamp - self.lidar_clouds[-1][0])
-        self.lidar_clouds.append((stamp, self.lidar.last_cloud, np.asarray(scan.T_world_sensor, float)[:3, 3].copy()))
+            self.tracker.lidar_clock.observe(stamp - self.lidar_clouds[-1].stamp)
+        self.lidar_clouds.append(LidarCloud(stamp, self.lidar.last_cloud, np.array(scan.T_world_sensor, float), el_min))
         # s: the voting's reach back and its scans (at 10 Hz), and a period to spare
         span = self.cfg.lidar.vote_span + 0.1 * (self.cfg.lidar.vote_scans + 1)
-        while self.lidar_clouds and self.lidar_clouds[0][0] < stamp - span:
+        while self.lidar_clouds and self.lidar_clouds[0].stamp < stamp - span:
             self.lidar_clouds.popleft()
         for d in found:
             if not any(_footprints_meet(d, c, grow) for c in dets):

@@ -30,7 +30,8 @@ from dodt.config import DODTConfig
 from dodt.detection import Detection
 from dodt.frames import CameraIntrinsics, LidarScan
 from dodt.geometry import column_bounds, crop_to_box, wrap_angle
-from dodt.identification import decide, faced_then, is_candidate, lock_window, match_reach, size_ok, vote
+from dodt.identification import (decide, faced_then, in_lidar_field, is_candidate, lock_window, match_reach,
+                                 size_ok, vote)
 from dodt.kalman import KalmanFilter
 from dodt.learned.layout import iou_one
 from dodt.result import TrackedObstacle
@@ -392,8 +393,8 @@ class Track:
 
     def identify(self, seq: int, poses: dict, clouds, K: CameraIntrinsics, max_depth: float,
                  lidar_clouds=(), other_cameras=None, lidar_clock: FrameClock | None = None) -> None:
-        """clouds(seq) -> that frame's whole filtered cloud, or None. lidar_clouds: (stamp, filtered cloud,
-        the scan's origin) of the recent LiDAR scans, oldest first (a track a LiDAR box updated votes against them).
+        """clouds(seq) -> that frame's whole filtered cloud, or None. lidar_clouds: the recent LiDAR scans'
+        dodt.identification.LidarCloud, oldest first (a track a LiDAR box updated votes against them).
         other_cameras: {sensor: (poses, clouds, K)} of the rig's other cameras (a track another camera
         measured votes in that camera's view). lidar_clock: the LiDAR's scan period, which the force-dynamic
         window of a track a LiDAR box updated is counted in (default: the camera's frame period)."""
@@ -446,11 +447,11 @@ class Track:
         LiDAR's view all round (every point was in it)."""
         lc = self.cfg.lidar
         cfg = replace(self.cfg.identification, vote_velocity=lc.vote_velocity)
-        then = [(t, c, o) for t, c, o in lidar_clouds if t <= now - lc.vote_span + 1e-6][-lc.vote_scans:]
+        then = [c for c in lidar_clouds if c.stamp <= now - lc.vote_span + 1e-6][-lc.vote_scans:]
         votes, valid, skipped = 0, 0, len(points)
         if then and speed >= cfg.velocity_threshold and len(points):
-            t_then = then[-1][0]
-            cloud = np.concatenate([c for _, c, _ in then]) if len(then) > 1 else then[0][1]
+            t_then = then[-1].stamp
+            cloud = np.concatenate([c.points for c in then]) if len(then) > 1 else then[0].points
             old = [c for c in self.clouds if c[1] <= t_then + 1e-6]
             dt = now - t_then
             if len(cloud) and dt > 0:
@@ -461,9 +462,16 @@ class Track:
                 near = crop_to_box(cloud, lo.astype(cloud.dtype) - r, hi.astype(cloud.dtype) + r)
                 # a surface that faced away from every scan voted against was not seen then (another face of
                 # the obstacle, come into view as the sensor passed it): its points do not vote
-                here = [o for t, _, o in lidar_clouds if abs(t - now) <= 1e-6]  # the scan that measured it
-                facing = faced_then(points, here[-1], [o for _, _, o in then], lc.face_cos) if here else None
-                votes, valid, skipped = vote(points, near, dt, v_box, None, None, 0.0, cfg, seen_then=facing)
+                here = [c.origin for c in lidar_clouds if abs(c.stamp - now) <= 1e-6]  # the scan that measured it
+                facing = faced_then(points, here[-1], [c.origin for c in then], lc.face_cos) if here else None
+                # what lay outside those scans' clouds (under the lowest ray, beyond the range) was not in them:
+                # the frame votes on the rest when that is most of it; otherwise it is no evidence either way,
+                # and the track's label stays as it is, as through a frame it coasted
+                field = in_lidar_field(points, then, lc.max_range, lc.min_range, lc.field_margin)
+                if field.mean() < lc.min_field_share:
+                    return
+                votes, valid, skipped = vote(points[field], near, dt, v_box, None, None, 0.0, cfg,
+                                             seen_then=None if facing is None else facing[field])
         self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg), lidar_clock,
                      by_lidar=True)
 
