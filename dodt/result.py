@@ -29,6 +29,8 @@ class TrackedObstacle:
     # detector's label), "motion" (neither: a tall box tracked at walking speed, dodt.motion_label);
     # "" when static
     evidence: str = ""
+    # the sensor of its latest detection: "" the first camera, another camera's name, "lidar"
+    sensor: str = ""
 
 
 @dataclass(frozen=True, eq=False)

@@ -529,7 +529,7 @@ class Track:
             dynamic=dynamic, coasting=self.coasting, age=stamp - self.born,
             history=h, is_person=person,
             position_std=float(np.sqrt(self.kf.position_variance)), filter_velocity=v.copy(), filter_acceleration=a.copy(),
-            evidence="voting" if self.geometric_dynamic else "person" if person else "")
+            evidence="voting" if self.geometric_dynamic else "person" if person else "", sensor=self.sensor or "")
 
 
 class Tracker:
