@@ -440,8 +440,8 @@ class LidarDetectorConfig:
     # A static obstacle the sensor passes shows new faces, whose points find the old faces' within reach
     # and would vote moving. None: every point votes
     face_cos: float | None = -0.1
-    # ours: a point votes only if it lay this far inside what the scans voted against kept (the detector's
-    # range, above their lowest ray; dodt.identification.in_lidar_field), and a frame votes only when
+    # ours: a point votes only if it lay this far inside the field of the scans voted against (above
+    # their lowest ray; dodt.identification.in_lidar_field), and a frame votes only when
     # at least min_field_share of its points did (otherwise its label stays): what the sensor passed
     # close by was under its lowest ray, and comes into its field as it moves away. A walker beside the
     # sensor keeps its upper body in the field while its legs come into it: the share keeps its vote,

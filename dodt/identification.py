@@ -177,18 +177,20 @@ class LidarCloud(NamedTuple):
         return self.T_world_sensor[:3, 3]
 
 
-def in_lidar_field(points: np.ndarray, scans, max_range: float, min_range: float, margin: float) -> np.ndarray:
-    """(n,) bool: whether each point lay, by ``margin`` m, inside the filtered cloud's reach of at least one
-    of ``scans`` (LidarCloud): horizontally within ``max_range`` and at least ``min_range`` from the
-    sensor (the detector's crop), and above the scan's lowest ray. A static box the sensor passes close
-    by is below its lowest ray (-7 deg: 0.2 m under the sensor at 1.6 m) until the sensor is past it; what
-    comes into the field from there was not in the cloud back then, and would vote moving."""
+def in_lidar_field(points: np.ndarray, scans, min_range: float, margin: float) -> np.ndarray:
+    """(n,) bool: whether each point lay, by ``margin`` m, inside the field of at least one of ``scans``
+    (LidarCloud): above the scan's lowest ray and beyond ``min_range`` (the detector's blind zone). A static
+    box the sensor passes close by is below its lowest ray (-7 deg: 0.2 m under the sensor at 1.6 m) until
+    the sensor is past it; its top face then comes into the field at once, points that were in no cloud
+    back then, and would vote moving. (The detector's horizontal range is left out: what it cuts comes in
+    a strip at a time, beside what the cloud held, and the points of a walker coming into it vote moving
+    against its own nearer side, as they should.)"""
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     inside = np.zeros(len(P), bool)
     for s in scans:
         T = np.asarray(s.T_world_sensor, dtype=np.float64)
         d = P - T[:3, 3]
-        ok = (np.hypot(d[:, 0], d[:, 1]) <= max_range - margin) & (np.linalg.norm(d, axis=1) >= min_range + margin)
+        ok = np.linalg.norm(d, axis=1) >= min_range + margin
         if s.elevation_min is not None:
             q = d @ T[:3, :3]  # the sensor frame
             ok &= q[:, 2] - np.hypot(q[:, 0], q[:, 1]) * np.tan(s.elevation_min) >= margin

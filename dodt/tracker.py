@@ -464,10 +464,10 @@ class Track:
                 # the obstacle, come into view as the sensor passed it): its points do not vote
                 here = [c.origin for c in lidar_clouds if abs(c.stamp - now) <= 1e-6]  # the scan that measured it
                 facing = faced_then(points, here[-1], [c.origin for c in then], lc.face_cos) if here else None
-                # what lay outside those scans' clouds (under the lowest ray, beyond the range) was not in them:
+                # what lay outside those scans' field (under the lowest ray) was not in their clouds:
                 # the frame votes on the rest when that is most of it; otherwise it is no evidence either way,
                 # and the track's label stays as it is, as through a frame it coasted
-                field = in_lidar_field(points, then, lc.max_range, lc.min_range, lc.field_margin)
+                field = in_lidar_field(points, then, lc.min_range, lc.field_margin)
                 if field.mean() < lc.min_field_share:
                     return
                 votes, valid, skipped = vote(points[field], near, dt, v_box, None, None, 0.0, cfg,

@@ -22,24 +22,24 @@ def pose(xyz, pitch=0.0):
     return T
 
 
-def test_under_the_lowest_ray_beyond_the_range_or_in_the_blind_zone_is_outside_the_field():
+def test_under_the_lowest_ray_or_in_the_blind_zone_is_outside_the_field():
     scans = [LidarCloud(0.0, np.empty((0, 3)), pose((0.0, 0.0, SENSOR_Z)), EL_MIN)]
     pts = np.array([[1.0, 0.0, 1.0],   # the lowest ray passes 1.28 m up at 1 m: under it
                     [5.0, 0.0, 1.0],   # at 5 m it passes 0.81 m up: 0.19 m above it
-                    [6.5, 0.0, 1.5],   # beyond the 6 m range
+                    [6.5, 0.0, 1.5],   # beyond the detector's range: in the field
                     [0.2, 0.0, 1.5],   # in the 0.35 m blind zone
                     [-3.0, 2.0, 1.3]])  # behind and beside, above the ray: all round
-    assert in_lidar_field(pts, scans, 6.0, 0.35, 0.1).tolist() == [False, True, False, False, True]
+    assert in_lidar_field(pts, scans, 0.35, 0.1).tolist() == [False, True, True, False, True]
     # the margin: 0.19 m above the ray is in by 0.1 m, not by 0.25 m
-    assert not in_lidar_field(pts[1:2], scans, 6.0, 0.35, 0.25)[0]
-    # no lowest ray known: the range alone
+    assert not in_lidar_field(pts[1:2], scans, 0.35, 0.25)[0]
+    # no lowest ray known: the blind zone alone
     scans_any = [scans[0]._replace(elevation_min=None)]
-    assert in_lidar_field(pts, scans_any, 6.0, 0.35, 0.1).tolist() == [True, True, False, False, True]
+    assert in_lidar_field(pts, scans_any, 0.35, 0.1).tolist() == [True, True, True, False, True]
     # pitched down 20 deg, the sensor's lowest ray ahead is 27 deg down: 1 m ahead it passes 0.91 m up
     tilted = [LidarCloud(0.0, np.empty((0, 3)), pose((0.0, 0.0, SENSOR_Z), np.radians(20.0)), EL_MIN)]
-    assert in_lidar_field(pts[:1], tilted, 6.0, 0.35, 0.05)[0]
+    assert in_lidar_field(pts[:1], tilted, 0.35, 0.05)[0]
     # in the field of any one of the scans is in
-    assert in_lidar_field(pts[:1], scans + tilted, 6.0, 0.35, 0.05)[0]
+    assert in_lidar_field(pts[:1], scans + tilted, 0.35, 0.05)[0]
 
 
 def visible_box_points(lo, hi, sensor, step=0.04):
