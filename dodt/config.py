@@ -445,8 +445,8 @@ class LidarDetectorConfig:
     # at least min_field_share of its points did (otherwise its label stays): what the sensor passed
     # close by was under its lowest ray, and comes into its field as it moves away. A walker beside the
     # sensor keeps its upper body in the field while its legs come into it: the share keeps its vote,
-    # the margin its legs out of it
-    field_margin: float = 0.1  # m
+    # the margin its legs out of it. None: every point votes
+    field_margin: float | None = 0.1  # m
     min_field_share: float = 0.5
 
 

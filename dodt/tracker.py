@@ -467,7 +467,8 @@ class Track:
                 # what lay outside those scans' field (under the lowest ray) was not in their clouds:
                 # the frame votes on the rest when that is most of it; otherwise it is no evidence either way,
                 # and the track's label stays as it is, as through a frame it coasted
-                field = in_lidar_field(points, then, lc.min_range, lc.field_margin)
+                field = np.ones(len(points), bool) if lc.field_margin is None else \
+                    in_lidar_field(points, then, lc.min_range, lc.field_margin)
                 if field.mean() < lc.min_field_share:
                     return
                 votes, valid, skipped = vote(points[field], near, dt, v_box, None, None, 0.0, cfg,

@@ -397,6 +397,8 @@ LIMITS: dict[str, Limit] = {
     "dodt.lidar.vote_velocity": _real(0.0, 10.0),  # m/s
     "dodt.lidar.face_cos": _real(-1.0, 1.0, optional=True),  # cosine; None: every point votes
     "dodt.lidar.vote_scans": _whole(1, 20),
+    "dodt.lidar.field_margin": _real(0.0, 2.0, optional=True),  # m; None: every point votes
+    "dodt.lidar.min_field_share": _FRACTION,
     "dodt.dbscan.eps": _real(0.0, 5.0, lo_open=True),  # m
     "dodt.dbscan.min_points": _whole(1, 10_000),
     "dodt.dbscan.min_size_xy": _real(0.0, 10.0),  # m
