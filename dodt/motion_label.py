@@ -3,8 +3,7 @@ identification, deciding with the point voting which tracks DODT reports dynamic
 
 A track the voting and the learned detector leave static is labelled dynamic when it is a standing
 person's box (height, footprint) tracked at walking speed for ``min_age`` at least, and does not lie on
-structure the static map has held for a while, nor on a wall of the geofence (a LiDAR track gains the
-label on a scan, where that test runs, not on the camera frames it coasts between scans). The label needs that map
+structure the static map has held for a while, nor on a wall of the geofence. The label needs that map
 (``structure_test``): without one it labels nothing, since a static pillar or a box's edge seen from a
 moving camera is often tracked at walking speed too (docs/perception.md). Once labelled dynamic, by any route, a track keeps the
 label however slowly it moves while it stays person-shaped. Every track says which evidence labelled
@@ -79,12 +78,7 @@ class MotionLabel:
             return False
         if o.id in self._on_structure:
             return False
-        if o.coasting:
-            # a LiDAR track coasts the camera frames between its scans: it gains the label on a scan, where
-            # the structure test runs (a box on structure reaching min_age between scans was labelled first)
-            if o.sensor == "lidar" and o.id not in self._dynamic:
-                return False
-        elif self.structure_test(o.center, o.size) >= m.on_structure or self._on_wall(o):
+        if not o.coasting and (self.structure_test(o.center, o.size) >= m.on_structure or self._on_wall(o)):
             self._on_structure.add(o.id)
             return False
         self._dynamic.add(o.id)

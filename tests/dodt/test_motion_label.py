@@ -71,21 +71,6 @@ def test_a_track_once_seen_on_long_held_structure_is_never_dynamic_by_motion():
     assert not label.moving(_track(coasting=True)) and not label.moving(_track())
 
 
-def test_a_lidar_track_gains_the_label_on_a_scan_where_the_structure_test_runs():
-    """A LiDAR track coasts two camera frames of three between its scans: a box on structure reaching the
-    label's age on such a frame was labelled before the structure test could see it. A camera's coasting
-    track (a missed detection) is labelled as before."""
-    label = MotionLabel(MotionConfig(on_structure=0.2))
-    label.structure_test = lambda c, s: 0.5  # on long-held structure
-    assert not label.moving(_track(coasting=True, sensor="lidar"))
-    assert not label.moving(_track(sensor="lidar"))  # its scan: on structure, for good
-    assert not label.moving(_track(coasting=True, sensor="lidar"))
-    label = _label()
-    assert not label.moving(_track(coasting=True, sensor="lidar"))  # off structure, not yet tested on a scan
-    assert label.moving(_track(sensor="lidar")) and label.moving(_track(coasting=True, sensor="lidar"))
-    assert _label().moving(_track(coasting=True))  # the first camera's
-
-
 def test_tracks_report_the_sensor_that_measured_them_last():
     from tests.dodt.test_rig_fusion import run
     d = DODT(preset("dodt"))
