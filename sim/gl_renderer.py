@@ -549,10 +549,7 @@ class GLRenderer:
             tex, fbo = self._views_targets[V]
             tex.write(data.tobytes())
             vao, _ = self._passes["depth"]
-            ctx = self.ctx
-            ctx.enable_only(ctx.DEPTH_TEST | ctx.CULL_FACE)
-            ctx.front_face = "cw"
-            ctx.cull_face = "back"
+            self._draw_state()
             fbo.use()
             fbo.viewport = (0, 0, V * W, H)
             fbo.clear(depth=1.0)
@@ -564,19 +561,28 @@ class GLRenderer:
                 vao.render()
             row0.value = 0
             fbo.read_into(zbuf, components=1, attachment=-1, dtype="f4", viewport=(0, 0, V * W, H))
-        if self.depth_bits == 16:  # onto PyBullet's grid: k / 65535
+        self._to_depth_grid(zbuf)
+        return np.ascontiguousarray(zbuf.reshape(H, V, W).transpose(1, 0, 2))
+
+    def _draw_state(self) -> None:
+        """Depth test on; back faces culled (counter-clockwise outward faces, drawn upside down)."""
+        ctx = self.ctx
+        ctx.enable_only(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        ctx.front_face = "cw"
+        ctx.cull_face = "back"
+
+    def _to_depth_grid(self, zbuf: np.ndarray) -> None:
+        """With 16 depth bits, ``zbuf`` (read back as float32) rounded in place onto PyBullet's grid k / 65535."""
+        if self.depth_bits == 16:
             zbuf *= np.float32(65535.0)
             np.rint(zbuf, out=zbuf)
             zbuf *= np.float32(1.0 / 65535.0)
-        return np.ascontiguousarray(zbuf.reshape(H, V, W).transpose(1, 0, 2))
 
     def _draw(self, data: np.ndarray, name: str, color: bool, segmentation: bool):
         self._tex.write(data.tobytes())
         vao, fbo = self._passes[name]
-        ctx, K = self.ctx, self.K
-        ctx.enable_only(ctx.DEPTH_TEST | ctx.CULL_FACE)
-        ctx.front_face = "cw"  # counter-clockwise outward faces, drawn upside down
-        ctx.cull_face = "back"
+        K = self.K
+        self._draw_state()
         if color:
             self._clear_color.clear(*BACKGROUND, 1.0, depth=1.0)
         else:
@@ -593,10 +599,7 @@ class GLRenderer:
             fbo.read_into(rgba, components=4, attachment=0)
         zbuf = np.empty((H, W), dtype=np.float32)
         fbo.read_into(zbuf, components=1, attachment=-1, dtype="f4")
-        if self.depth_bits == 16:  # onto PyBullet's grid: k / 65535
-            zbuf *= np.float32(65535.0)
-            np.rint(zbuf, out=zbuf)
-            zbuf *= np.float32(1.0 / 65535.0)
+        self._to_depth_grid(zbuf)
         seg = None
         if segmentation:
             seg = np.empty((H, W), dtype=np.int32)

@@ -92,21 +92,22 @@ class PanoramaCaster:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _inverse_depth(img, u, v, near, far):
-    """1 / planar depth [1/m] at pixel (u, v) of a depth buffer; 0 for the background."""
+def _inverse_depth(img, u, v, w_near, w_slope):
+    """1 / planar depth [1/m] at pixel (u, v) of a depth buffer, w_near - w_slope * the buffer's value (with
+    w_near = 1 / near, w_slope = (far - near) / (far near): 0 at the far plane); 0 for the background."""
     d = img[v, u]
     if d >= np.float32(1.0 - 1e-6):
         return 0.0
-    return (far - (far - near) * d) / (far * near)
+    return w_near - w_slope * d
 
 
 @njit(cache=True, nogil=True)
-def _edge_normal(img, uc, vc, fx, fy, cx, cy, near, far, c):
+def _edge_normal(img, uc, vc, fx, fy, cx, cy, w_near, w_slope, c):
     """The unit normal (optical frame, not yet oriented) at pixel (uc, vc) from its own surface, written into
     ``c`` (3,): of its left and right neighbours the one nearer in depth, likewise above and below; zeros
     where it has none on either side."""
     H, W = img.shape
-    wc = _inverse_depth(img, uc, vc, near, far)
+    wc = _inverse_depth(img, uc, vc, w_near, w_slope)
     zc = 1.0 / wc
     a0 = a1 = a2 = b0 = b1 = b2 = 0.0
     for axis in range(2):
@@ -116,7 +117,7 @@ def _edge_normal(img, uc, vc, fx, fy, cx, cy, near, far, c):
             un, vn = (uc + step, vc) if axis == 0 else (uc, vc + step)
             if un < 0 or vn < 0 or un >= W or vn >= H:
                 continue
-            wn = _inverse_depth(img, un, vn, near, far)
+            wn = _inverse_depth(img, un, vn, w_near, w_slope)
             if wn <= 0.0 or abs(1.0 / wn - zc) >= gap:
                 continue
             gap = abs(1.0 / wn - zc)
@@ -149,9 +150,7 @@ def _lookup(zbuf, dirs, R_views, R_world, fx, fy, cx, cy, near, far, reach, tol)
     normal = np.zeros((n, 3))
     w = np.empty(4)
     c = np.empty(3)
-    # the inverse depth of a buffer value d is w_near - w_slope * d (0 at the far plane)
-    w_near, w_slope = 1.0 / near, (far - near) / (far * near)
-    background = np.float32(1.0 - 1e-6)
+    w_near, w_slope = 1.0 / near, (far - near) / (far * near)  # _inverse_depth's
     for i in range(n):
         # the view whose axis is nearest the ray's azimuth (their optical z axes lie in the sensor's xy plane)
         k, best = 0, -np.inf
@@ -174,8 +173,7 @@ def _lookup(zbuf, dirs, R_views, R_world, fx, fy, cx, cy, near, far, reach, tol)
         img = zbuf[k]
         ok = True
         for j in range(4):
-            d = img[v0 + (j >> 1), u0 + (j & 1)]
-            w[j] = 0.0 if d >= background else w_near - w_slope * d
+            w[j] = _inverse_depth(img, u0 + (j & 1), v0 + (j >> 1), w_near, w_slope)
             ok = ok and w[j] > 0.0
         if ok:  # one plane: the inverse depth is affine in the image, so w00 + w11 = w01 + w10
             ok = abs(w[0] + w[3] - w[1] - w[2]) <= tol * max(w[0], w[1], w[2], w[3])
@@ -192,7 +190,7 @@ def _lookup(zbuf, dirs, R_views, R_world, fx, fy, cx, cy, near, far, reach, tol)
             j = int(fu >= 0.5) + 2 * int(fv >= 0.5)
             wi = w[j]
             if wi > 0.0:
-                _edge_normal(img, u0 + (j & 1), v0 + (j >> 1), fx, fy, cx, cy, near, far, c)
+                _edge_normal(img, u0 + (j & 1), v0 + (j >> 1), fx, fy, cx, cy, w_near, w_slope, c)
         if wi <= 0.0 or 1.0 / wi / Z > reach:
             continue
         out[i] = 1.0 / wi / Z
