@@ -460,10 +460,6 @@ class Track:
                 r = match_reach(dt, cfg)
                 lo, hi = column_bounds(points)
                 near = crop_to_box(cloud, lo.astype(cloud.dtype) - r, hi.astype(cloud.dtype) + r)
-                # a surface that faced away from every scan voted against was not seen then (another face of
-                # the obstacle, come into view as the sensor passed it): its points do not vote
-                here = [c.origin for c in lidar_clouds if abs(c.stamp - now) <= 1e-6]  # the scan that measured it
-                facing = faced_then(points, here[-1], [c.origin for c in then], lc.face_cos) if here else None
                 # what lay outside those scans' field (under the lowest ray) was not in their clouds:
                 # the frame votes on the rest when that is most of it; otherwise it is no evidence either way,
                 # and the track's label stays as it is, as through a frame it coasted
@@ -471,6 +467,10 @@ class Track:
                     in_lidar_field(points, then, lc.min_range, lc.field_margin)
                 if field.mean() < lc.min_field_share:
                     return
+                # a surface that faced away from every scan voted against was not seen then (another face of
+                # the obstacle, come into view as the sensor passed it): its points do not vote
+                here = [c.origin for c in lidar_clouds if abs(c.stamp - now) <= 1e-6]  # the scan that measured it
+                facing = faced_then(points, here[-1], [c.origin for c in then], lc.face_cos) if here else None
                 votes, valid, skipped = vote(points[field], near, dt, v_box, None, None, 0.0, cfg,
                                              seen_then=None if facing is None else facing[field])
         self._decide(is_candidate(speed, votes, valid, skipped, cfg) and size_ok(self.size, cfg), lidar_clock,
@@ -612,7 +612,7 @@ class Tracker:
         R, origin = T[:3, :3], T[:3, 3]
         az = np.asarray(scan.azimuth, dtype=np.float64)
         el = np.asarray(scan.elevation, dtype=np.float64)
-        reach = np.asarray(scan.ranges, dtype=np.float64) * np.cos(el)  # horizontal range of each return
+        ranges = np.asarray(scan.ranges, dtype=np.float64)
 
         def seen_past(tr: Track) -> bool:
             q = R.T @ (tr.center - origin)  # the box's centre in the sensor frame
@@ -624,8 +624,10 @@ class Tracker:
             off = np.abs(wrap_angle(az - math.atan2(q[1], q[0])))
             ray = (off <= half_az) & (el >= math.atan2(q[2] - half_h, d)) & (el <= math.atan2(q[2] + half_h, d))
             n_valid = int(np.count_nonzero(ray))
-            return n_valid >= 10 and np.count_nonzero(reach[ray] > d + tc.seen_through_margin) > \
-                tc.seen_through_fraction * n_valid
+            if n_valid < 10:
+                return False
+            reach = ranges[ray] * np.cos(el[ray])  # the horizontal range of those returns
+            return np.count_nonzero(reach > d + tc.seen_through_margin) > tc.seen_through_fraction * n_valid
 
         return self._drop_seen_through(seen_past)
 
