@@ -533,6 +533,11 @@ class Track:
             evidence="voting" if self.geometric_dynamic else "person" if person else "", sensor=self.sensor or "")
 
 
+
+def _footprint_and_top(boxes) -> np.ndarray:
+    """(n, 3): each box's x and y size and its top's height (objects with center and size (3,))."""
+    return np.array([[b.size[0], b.size[1], b.center[2] + 0.5 * b.size[2]] for b in boxes], float).reshape(-1, 3)
+
 class Tracker:
     def __init__(self, cfg: DODTConfig):
         self.cfg = cfg
@@ -679,9 +684,12 @@ class Tracker:
                 dc = np.array([dets[j].center[:2] for j in ud])
                 dist = np.linalg.norm(tc[:, None] - dc[None], axis=2)
                 g = gate + 2.0 * np.sqrt([views[i].position_variance for i in ut])
-                # ... but never to something of another size: a wall is no person (paper Fig. 7)
-                ts = np.array([views[i].size for i in ut])
-                ds = np.array([dets[j].size for j in ud])
+                # ... but never to something of another size: a wall is no person (paper Fig. 7). The
+                # footprints and the tops are compared, not the bottoms: a sensor's field cuts a near
+                # person's lower part (the LiDAR's lowest ray, the camera's lower edge), so a track fed
+                # by one sensor's partial boxes and a detection of the whole person differ there.
+                ts = _footprint_and_top([views[i] for i in ut])
+                ds = _footprint_and_top([dets[j] for j in ud])
                 similar = np.max(np.abs(ts[:, None] - ds[None]), axis=2) < self.cfg.association.size_scale
                 cost = np.where((dist < g[:, None]) & similar, -dist, -np.inf)
                 pairs += [(ut[a], ud[b]) for a, b in assign(cost, -np.inf)]

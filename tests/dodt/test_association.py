@@ -386,6 +386,25 @@ def test_fallback_stage_matches_a_changed_shape_nearby_but_not_another_size():
     assert t2.associate([changed], CAMERA) == []
 
 
+def test_fallback_stage_compares_tops_not_bottoms():
+    # A track fed by boxes whose lower part a sensor's field cut off (a LiDAR's lowest ray above a near
+    # person's legs): 0.6 m tall, its top at 1.75 m.
+    cfg = DODTConfig()
+    tracker = Tracker(cfg)
+    tracker.correct([det((3.0, 0.0, 1.45), size=(0.5, 0.5, 0.6))], [], 0, 0.0)
+    # the whole person at the same place, 1.75 m tall: the features reject it (another size) ...
+    whole = det((3.05, 0.0, 0.875), size=(0.5, 0.5, 1.75), seed=2)
+    s, thr = similarity_matrix([tracker.tracks[0].view()], [whole], cfg.association, CAMERA)
+    assert s[0, 0] < thr
+    # ... the second stage takes it: same footprint, same top
+    assert tracker.associate([whole], CAMERA) == [(0, 0)]
+    # a 3 m pillar of the same footprint there is no match (its top is 1.25 m higher), nor a 0.5 m box
+    pillar = det((3.05, 0.0, 1.5), size=(0.5, 0.5, 3.0), seed=3)
+    low_box = det((3.05, 0.0, 0.25), size=(0.5, 0.5, 0.5), seed=4)
+    assert tracker.associate([pillar], CAMERA) == []
+    assert tracker.associate([low_box], CAMERA) == []
+
+
 def test_constant_velocity_target_does_not_overshoot():
     # Box centres measured (exact here), so that only the pseudo-measurements' construction is
     # tested: no spurious acceleration from a velocity that was never measured.
