@@ -533,10 +533,10 @@ class Track:
             evidence="voting" if self.geometric_dynamic else "person" if person else "", sensor=self.sensor or "")
 
 
-
 def _footprint_and_top(boxes) -> np.ndarray:
     """(n, 3): each box's x and y size and its top's height (objects with center and size (3,))."""
     return np.array([[b.size[0], b.size[1], b.center[2] + 0.5 * b.size[2]] for b in boxes], float).reshape(-1, 3)
+
 
 class Tracker:
     def __init__(self, cfg: DODTConfig):
