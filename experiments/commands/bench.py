@@ -20,6 +20,7 @@ APPLIES_TO = {
     "--seconds": ("sim", "runtime", "loop"),
     "--out": ("perception",),
     "--seeds": ("perception", "planner"),
+    "--split": ("perception",),
     "--scenarios": ("perception",),
     "--configs": ("perception",),
     "--duration": ("perception",),
@@ -69,6 +70,8 @@ def add_parser(sub) -> None:
     opt("--out", "output folder (default runs/bench_perception)")
     opt("--seeds", "seeds 0..N-1 (perception: per scenario, default 1; planner: the episodes replayed, default 2)",
         type=whole(1, 10_000))
+    opt("--split", "the seeds' split: dev (seeds 0..N-1, the default) to choose on, test (1000..1000+N-1) "
+                   "to report", choices=("dev", "test"))
     opt("--scenarios", "comma-separated scenarios")
     opt("--configs", "comma-separated configurations")
     opt("--duration", "seconds per scenario", type=seconds)
@@ -137,6 +140,7 @@ def cmd_bench(args) -> int:
     if args.what == "perception":
         from dodt.presets import PRESETS
         from experiments import bench_perception
+        from experiments.benchmark import SweepError, split_seeds
 
         scenarios = tuple(args.scenarios.split(",")) if args.scenarios else bench_perception.SCENARIOS
         for s in scenarios:
@@ -148,7 +152,11 @@ def cmd_bench(args) -> int:
         output_folder(args.out)
         duration = args.duration if args.duration else (6.0 if args.quick else None)
         rates = parse_rates(args.rates) if args.rates else None
-        bench_perception.run(Path(args.out), list(range(args.seeds or 1)), scenarios, configs, duration, rates=rates,
+        try:
+            seeds = split_seeds(args.split or "dev", args.seeds or 1)
+        except SweepError as e:
+            raise UserError(str(e)) from None
+        bench_perception.run(Path(args.out), seeds, scenarios, configs, duration, rates=rates,
                              rig_name=args.rig or "front")
         return 0
     if args.what in ("planner", "loop"):  # --config names the perception mode

@@ -158,6 +158,7 @@ BENCH_MISFITS = [
     ("perception", ["--json", "OUT.json"], "sim, runtime, planner"),
     ("sim", ["--renderer", "tiny"], "loop"),
     ("sim", ["--rig", "lidar"], "perception, runtime, loop"),
+    ("planner", ["--split", "test"], "perception"),
 ]
 
 
@@ -205,6 +206,18 @@ def test_bench_takes_the_options_of_its_bench_and_fills_in_the_defaults():
     args = build_parser().parse_args(["bench", "perception", "--quick", "--seeds", "2"])
     check_applies(args)
     assert (args.quick, args.seeds, args.out, args.duration) == (True, 2, "runs/bench_perception", None)
+
+
+@pytest.mark.parametrize("split, seeds", [([], [0, 1, 2]), (["--split", "test"], [1000, 1001, 1002])])
+def test_bench_perception_runs_the_seeds_of_its_split(monkeypatch, tmp_path, split, seeds):
+    import experiments.bench_perception as bp
+    from experiments.cli import main
+
+    got = {}
+    monkeypatch.setattr(bp, "run", lambda out, seeds, *a, **k: got.setdefault("seeds", seeds))
+    assert main(["bench", "perception", "--seeds", "3", *split, "--configs", "dodt", "--scenarios", "circles",
+                 "--out", str(tmp_path / "out")]) == 0
+    assert got["seeds"] == seeds
 
 
 def test_version_prints_the_package_version(capsys):
