@@ -215,7 +215,7 @@ def size_ok(size: np.ndarray, cfg: IdentificationConfig) -> bool:
 
 
 def decide(candidates: list[bool], dynamic_history, cfg: IdentificationConfig,
-           clock: FrameClock | None = None, lock_clock: FrameClock | None = None) -> bool:
+           clock: FrameClock | None = None, lock_clock: FrameClock | None = None, lock: bool = True) -> bool:
     """Consistency over frames, with the reference code's hysteresis, and ours: a dynamic track
     turns static only when no frame over ``release_span`` was a candidate.
 
@@ -229,7 +229,8 @@ def decide(candidates: list[bool], dynamic_history, cfg: IdentificationConfig,
     boxes update; default ``clock``): it locks once the history fills the window and the dynamic
     labels stand for ``force_dynamic_fraction`` of it. At one rate that is the reference code's count
     (10 of the last 30 frames at 30 Hz); a track measured by a camera and a LiDAR in turn counts
-    each label for its sensor's period."""
+    each label for its sensor's period. ``lock`` False: the force-dynamic lock does not hold this frame
+    (the caller's reason: dodt.tracker.Track._decide)."""
     clock = clock or FrameClock()
     n = clock.frames_within(cfg.consistency_span)
     if len(candidates) >= n and all(candidates[-n:]):
@@ -237,7 +238,7 @@ def decide(candidates: list[bool], dynamic_history, cfg: IdentificationConfig,
     if cfg.release_span is not None and dynamic_history and dynamic_history[-1][0] and \
             any(candidates[-(clock.intervals(cfg.release_span) + 1):]):
         return True
-    if cfg.force_dynamic_span is None:
+    if cfg.force_dynamic_span is None or not lock:
         return False
     window = lock_window(cfg.force_dynamic_span, lock_clock or clock)
     filled = dynamic = 0.0

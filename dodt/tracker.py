@@ -481,15 +481,23 @@ class Track:
         the force-dynamic history stands for the frame period of the sensor that measured it, the camera's
         (``self.clock``) or the LiDAR's (``lidar_clock``, default the camera's), as each clock has it now;
         the window is the measuring sensor's. The labels are kept for the longer of the camera's window and
-        the LiDAR's: one history for a track both measure."""
+        the LiDAR's: one history for a track both measure.
+        The lock holds a track a LiDAR box measured only while its box is as tall as a standing person
+        (``motion.height``'s lower bound; ours). A person's LiDAR box reaches the floor (the detector extends
+        a box the lowest ray cuts), so a person's track keeps that height. A sparse scan of a shelf or a
+        box shows a different part of it every scan (slivers 0.04-1.8 m tall): a track of a person who went
+        out of range can be carried along such fragments, its box shrinking, and the lock kept the label
+        its person had earned on a static obstacle."""
         cfg = self.cfg.identification
         lidar_clock = lidar_clock or self.clock
         periods = (self.clock.period, lidar_clock.period)
         self.candidates.append(cand)
         keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
                                        self.clock.intervals(cfg.release_span) + 1))
+        person_tall = float(self.size[2]) >= self.cfg.motion.height[0]
         self.geometric_dynamic = decide(list(self.candidates), [(x, periods[k]) for x, k in self.dynamic_history],
-                                        cfg, self.clock, lidar_clock if by_lidar else self.clock)
+                                        cfg, self.clock, lidar_clock if by_lidar else self.clock,
+                                        lock=person_tall or not by_lidar)
         self.dynamic_history.append((self.geometric_dynamic, int(by_lidar)))
         span = cfg.force_dynamic_span
         if span is None:

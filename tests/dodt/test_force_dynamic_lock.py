@@ -71,3 +71,26 @@ def test_frames_coasted_through_do_not_lock_a_track_dynamic():
         measure(k, slab(3.0, 0.4, n=300, seed=k, width=0.15), [0.0, 0.0])
     r = frames_of(cfg.identification.release_span)
     assert all(labels[25:25 + r - 1]) and not any(labels[25 + r - 1:])
+
+
+def _lidar_track(cfg, height):
+    from dodt.detection import Detection
+    from dodt.tracker import Track
+
+    det = Detection.from_bounds(np.array([3.0, 0.0, 1.7 - height]), np.array([3.4, 0.4, 1.7]), "lidar")
+    return Track(1, det, 0, 0.0, cfg)
+
+
+def test_the_lock_holds_a_lidar_track_only_while_its_box_is_person_tall():
+    """A track the LiDAR measures, locked dynamic by its history, and no candidate now: with a
+    person-tall box (a person's LiDAR box reaches the floor) the lock keeps it dynamic; with a box
+    shorter than motion.height's lower bound (a fragment of a shelf the track was carried onto) it does
+    not. A camera track keeps the lock whatever its height (the image's edge cuts people's boxes)."""
+    cfg = DODTConfig()
+    scans = _clock(10.0)
+    w = frames_of(cfg.identification.force_dynamic_span, 10.0)
+    for height, by_lidar, held in [(1.7, True, True), (0.6, True, False), (0.6, False, True)]:
+        track = _lidar_track(cfg, height)
+        track.dynamic_history.extend([(True, 1)] * w)
+        track._decide(False, scans, by_lidar=by_lidar)
+        assert track.geometric_dynamic == held, (height, by_lidar)
