@@ -198,6 +198,10 @@ class TrackConfig:
     # person's radius), or beyond it, is held where it was across the wall, its velocity into the wall
     # removed: nothing walks through walls (DODT.set_scene gives the geofence; without one, off). None: off
     wall_clearance: float | None = 0.2
+    # m: a track left without a detection whose centre lies this close to the centre of a track a detection
+    # updated in the same frame is the same obstacle twice (one of a person's two tracks, which take the
+    # person's boxes in turn): it is dropped instead of coasting on (ours). None: off
+    duplicate_radius: float | None = 0.25
     output_history: float = 3.0  # s of centre history kept and output (the paper's figures show 3 s)
     # output size: exponential smoothing weight of the new detection, per frame at reference_rate (ours)
     size_smoothing: float = 0.3

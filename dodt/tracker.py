@@ -554,6 +554,7 @@ class Tracker:
         self.clock = FrameClock(cfg.reference_rate)
         self.lidar_clock = FrameClock(cfg.reference_rate)  # the LiDAR's scan period (DODT observes it)
         self.restarts = 0  # tracks re-initialised after a jump (Track.jumped)
+        self.duplicates_dropped = 0  # tracks dropped beside a measured one (track.duplicate_radius)
         self.walls: tuple[np.ndarray, np.ndarray] | None = None  # the geofence, (x, y) low and high
 
     def reset(self) -> None:
@@ -727,10 +728,17 @@ class Tracker:
             else:
                 tr.update(dets[di], seq, stamp)
         survivors = []
+        dup_r = self.cfg.track.duplicate_radius
+        measured = np.array([self.tracks[t].center_xy for t in matched_t]).reshape(-1, 2)
+        measured_dyn = np.array([self.tracks[t].dynamic for t in matched_t], bool)
         for i, tr in enumerate(self.tracks):
             if i not in matched_t:
                 if stamp - tr.last_seen > self._coast_time(tr, camera):
                     continue  # lost for too long
+                if dup_r is not None and np.any((np.hypot(*(measured - tr.center_xy).T) < dup_r)
+                                                & (measured_dyn | (not tr.dynamic))):
+                    self.duplicates_dropped += 1
+                    continue  # the obstacle a track beside it measured now (a dynamic one, or both static)
                 # the filter's speed before track.max_speed bounded it
                 if tr.is_person and tr.filter_speed > self.cfg.track.max_coast_speed:
                     continue  # a person faster than people walk: a velocity made of noise

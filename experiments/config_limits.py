@@ -442,6 +442,7 @@ LIMITS: dict[str, Limit] = {
     "dodt.track.max_coast_speed": _SPEED,
     "dodt.track.max_speed": _real(0.0, 10.0, lo_open=True, optional=True),  # m/s; none: unbounded
     "dodt.track.jump_margin": _real(0.0, 10.0, optional=True),  # m; none: never re-initialised
+    "dodt.track.duplicate_radius": _real(0.0, 5.0, optional=True),  # m; none: off
     "dodt.track.wall_clearance": _real(0.0, 10.0, optional=True),  # m
     "dodt.track.camera_body_radius": _real(0.0, 5.0, optional=True),  # m; none: off
     "dodt.track.output_history": _HISTORY,

@@ -194,3 +194,25 @@ def test_a_track_measured_at_a_wall_is_not_held():
     for k in range(5):
         step(tracker, k, [det((6.0, 2.0, 0.9), size=(1.0, 0.1, 1.7))])
     assert tracker.tracks[0].center_xy[1] == pytest.approx(2.0, abs=0.05)
+
+
+@pytest.mark.parametrize("radius", [0.25, None])
+def test_a_track_beside_one_measured_now_is_the_same_obstacle_and_dropped(radius):
+    """Two tracks on one walker, which take its boxes in turn: the one left without a detection while the
+    other, 0.15 m from it, was measured is dropped (track.duplicate_radius), not coasted off the walker.
+    A dynamic track beside a measured static one is kept (its label is the walker's), and so is a track
+    farther than the radius (two people side by side)."""
+    tracker = Tracker(with_track(duplicate_radius=radius))
+    step(tracker, 0, [det([3.0, 0.0, 0.85]), det([3.15, 0.0, 0.85], seed=1), det([3.0, 0.6, 0.85], seed=2)],
+         pairs=[])
+    a, b, far = tracker.tracks
+    step(tracker, 1, [det([3.15, 0.0, 0.85], seed=3), det([3.0, 0.6, 0.85], seed=4)], pairs=[(1, 0), (2, 1)])
+    ids = {t.id for t in tracker.tracks}
+    assert {b.id, far.id} <= ids
+    assert (a.id in ids) == (radius is None)
+    assert tracker.duplicates_dropped == (0 if radius is None else 1)
+    dyn = Tracker(with_track(duplicate_radius=radius))
+    step(dyn, 0, [det([3.0, 0.0, 0.85]), det([3.15, 0.0, 0.85], seed=1)], pairs=[])
+    dyn.tracks[0].geometric_dynamic = True
+    step(dyn, 1, [det([3.15, 0.0, 0.85], seed=3)], pairs=[(1, 0)])
+    assert len(dyn.tracks) == 2, "a dynamic track is not dropped for a static one"
