@@ -494,10 +494,9 @@ class Track:
         self.candidates.append(cand)
         keep_last(self.candidates, max(self.clock.frames_within(cfg.consistency_span),
                                        self.clock.intervals(cfg.release_span) + 1))
-        person_tall = float(self.size[2]) >= self.cfg.motion.height[0]
         self.geometric_dynamic = decide(list(self.candidates), [(x, periods[k]) for x, k in self.dynamic_history],
                                         cfg, self.clock, lidar_clock if by_lidar else self.clock,
-                                        lock=person_tall or not by_lidar)
+                                        lock=not by_lidar or float(self.size[2]) >= self.cfg.motion.height[0])
         self.dynamic_history.append((self.geometric_dynamic, int(by_lidar)))
         span = cfg.force_dynamic_span
         if span is None:
