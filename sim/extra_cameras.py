@@ -1,9 +1,10 @@
-"""A rig's cameras beyond the first (sim.rig): depth frames drawn in the world's own process.
+"""A rig's cameras beyond the first (sim.rig): depth frames drawn beside the first camera's.
 
 The first camera is the world's (its renderer, render process, colour and segmentation); the others are
-drawn here with the gl renderer (sim.gl_renderer, depth only, one pass per camera from one read of the
-scene's poses) at the same capture instants, from the same body pose, each turned about the body's z
-axis by its yaw. Each camera draws its depth noise (sim.depth_noise, the scenario's model) from its own
+drawn where it is (in the render process when the world has one that renders with the gl renderer, else
+in the world's own process) with the gl renderer (sim.gl_renderer, depth only, one pass per camera from
+one read of the scene's poses) at the same capture instants, from the same body pose, each turned about
+the body's z axis by its yaw. Each camera draws its depth noise (sim.depth_noise, the scenario's model) from its own
 stream, so the first camera's frames are the same whatever else the rig holds. They carry no colour and
 no segmentation: DODT's depth detectors read depth alone.
 """
@@ -19,6 +20,13 @@ from sim.rig import camera_mount
 EXTRA_CAMERA_SEED_TAG = 0x43414D  # "CAM": the extra cameras' noise streams, apart from every other
 
 
+def in_first_camera(T_body_camera: np.ndarray, yaws) -> list[np.ndarray]:
+    """Each other camera (turned by its yaw [deg] about the body's z axis) in the first camera's frame: the
+    pose its frames carry is the first's times this."""
+    T_camera_body = np.linalg.inv(np.asarray(T_body_camera, dtype=np.float64))
+    return [T_camera_body @ camera_mount(T_body_camera, float(y)) for y in yaws]
+
+
 class ExtraCameras:
     """Depth images of the rig's other cameras. ``yaws`` [deg] of each camera's optical axis from the first
     camera's, about the body's z axis; ``T_body_camera``: the first camera's mount. Build it after the last
@@ -28,9 +36,7 @@ class ExtraCameras:
         self.K = K
         self.yaws = tuple(float(y) for y in yaws)
         self.T_body_cameras = [camera_mount(T_body_camera, y) for y in self.yaws]
-        # each camera in the first camera's frame: the pose its frames carry is the first's times this
-        T_camera_body = np.linalg.inv(np.asarray(T_body_camera, dtype=np.float64))
-        self.T_first_cameras = [T_camera_body @ T for T in self.T_body_cameras]
+        self.T_first_cameras = in_first_camera(T_body_camera, self.yaws)
         streams = np.random.SeedSequence([int(seed), EXTRA_CAMERA_SEED_TAG]).spawn(len(self.yaws))
         no_segmentation = np.full(1, -1, np.int64)
         self._finish = [ImageFinisher(camera, noise, np.random.default_rng(s), no_segmentation, False)

@@ -75,7 +75,8 @@ class Capture:
     T_body: np.ndarray  # the drone's true pose
     state: DroneState
     obstacles: tuple[ObstacleTruth, ...]
-    # the rig's other cameras (sim.extra_cameras): (depth mm, T_camera_other: that camera in the first's frame)
+    # the rig's other cameras (sim.extra_cameras): (depth mm, T_camera_other: that camera in the first's frame);
+    # depth None: drawn by the render process, its images follow the first camera's
     extra: tuple = ()
 
 
@@ -100,7 +101,8 @@ class FrameQueue:
             images = c.images
             if images is None:  # rendered beside us, the noise drawn there (in capture order, as in one process)
                 images = fetch(c.seq)
-            depth_mm, color, seg = images
+            depth_mm, color, seg = images[:3]
+            drawn_beside = iter(images[3:])
             self.frame = SensorFrame(depth=depth_mm, color=color, intrinsics=self.intrinsics,
                                      T_world_camera=c.T_odom, stamp=c.stamp, seq=c.seq)
             self.truth = GroundTruth(stamp=c.stamp, seq=c.seq, obstacles=c.obstacles, T_world_camera=c.T_true,
@@ -108,6 +110,7 @@ class FrameQueue:
                                      segmentation=seg, T_world_body=c.T_body)
             self.extra = tuple(SensorFrame(depth=d, color=None, intrinsics=self.intrinsics,
                                            T_world_camera=c.T_odom @ T_rel, stamp=c.stamp, seq=c.seq)
-                               for d, T_rel in c.extra)
+                               for d, T_rel in ((next(drawn_beside) if d is None else d, T_rel)
+                                                for d, T_rel in c.extra))
             delivered = self.frame
         return delivered

@@ -1,7 +1,8 @@
 """The render process's child (sim.render_process starts it): ``python -m sim.render_child FD PARENT_PID``.
 
 It builds its own copy of each world the parent asks for and answers the parent's frames over the socket
-FD; it ends itself when the process PARENT_PID is gone (sim.parent_watch). Nothing imports this module:
+FD (with the rig's other cameras' depth images when the parent asks for them); it ends itself when the
+process PARENT_PID is gone (sim.parent_watch). Nothing imports this module:
 only the child runs it, so the parent's side does not depend on sim.world.
 """
 from __future__ import annotations
@@ -47,19 +48,25 @@ def serve_world(conn, scenario, seed, renderer, segmentation, light_direction, c
     # not all alike (the same pose's colour differed between a first and a later render), so the child renders
     # exactly the frames the parent would, in the same order.
     first = world.last_images
+    cameras = ()  # the other cameras drawn here: (the parent's World.add_cameras call, their yaws)
     try:
         conn.send(("ready", world.renderer))  # (the parent may have ended this child meanwhile: OSError)
         while True:
             msg = conn.recv()
             if msg is None:
                 return True
-            seq, t, pos, quat, people, light = msg
+            seq, t, pos, quat, people, light, wanted = msg
             r0 = world.render_wall_time  # the renderer's share (benchmarks), without the noise
             if seq == 0 and first is not None:
                 images, first = first, None
             else:
                 world.light_direction = light
                 images = world.images_at(pos, quat, people)
+            if wanted != cameras:  # the rig's other cameras, built as the parent's world would build them
+                world.add_cameras(wanted[1] if wanted else ())
+                cameras = wanted
+            if wanted:
+                images = (*images, *world.extra_images_at(pos, quat, people))
             render_s = world.render_wall_time - r0
             conn.send(("frame", seq, render_s, [None if a is None else (a.dtype.str, a.shape) for a in images]))
             for a in images:

@@ -142,11 +142,14 @@ class RenderProcess:
         timeout = _REPLY_TIMEOUT_S if timeout is None else timeout
         return RenderProcessError(f"the render process did not answer within {timeout:.0f} s ({doing})")
 
-    def submit(self, seq: int, t: float, pos, quat, people, light_direction) -> None:
-        """Frame ``seq`` captured at sim time t: the drone's pose and the people's (sim.people.WalkerPose)."""
+    def submit(self, seq: int, t: float, pos, quat, people, light_direction, cameras: tuple = ()) -> None:
+        """Frame ``seq`` captured at sim time t: the drone's pose and the people's (sim.people.WalkerPose).
+        cameras: () or (n, yaws): the rig's other cameras (World.add_cameras, the n-th call), drawn too, their
+        depth images following the first camera's in ``result``."""
         light = None if light_direction is None else [float(x) for x in light_direction]
         # pickled now, as it stands at capture; sent when the child has answered the requests before it
-        self._unsent.append(pickle.dumps((seq, float(t), tuple(pos), tuple(quat), list(people), light)))
+        self._unsent.append(pickle.dumps((seq, float(t), tuple(pos), tuple(quat), list(people), light,
+                                          tuple(cameras))))
         self._outstanding.append(seq)
         self._send_next()
 
@@ -168,7 +171,7 @@ class RenderProcess:
 
     def result(self, seq: int) -> tuple[np.ndarray | None, ...]:
         """The images of frame ``seq`` (``World.images_at``): depth in mm with the depth noise, colour or
-        None, obstacle ids or None."""
+        None, obstacle ids or None; then the other cameras' depth images when ``submit`` asked for them."""
         if not self._outstanding or self._outstanding[0] != seq:
             raise RenderProcessError(f"frame {seq} asked out of order (outstanding: {self._outstanding[:3]})")
         self._send_next()  # (sent already, unless an earlier send failed)

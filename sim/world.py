@@ -40,7 +40,7 @@ from sim.contacts import CLEARANCE_CAP, CLEARANCE_LOG_LEN, ContactMonitor
 from sim.controller import CascadedController, DroneState, Reference
 from sim.crowd import Crowd
 from sim.depth_noise import DepthNoiseModel
-from sim.extra_cameras import ExtraCameras
+from sim.extra_cameras import ExtraCameras, in_first_camera
 from sim.frame_capture import Capture, FrameQueue, ImageFinisher
 from sim.gl_renderer import GLUnavailable
 from sim.ground_truth import GroundTruth, ObstacleTruth
@@ -124,6 +124,8 @@ class World:
         self._client = self._query_client = None
         self._lidar_panorama = None  # (model, sim.lidar_panorama.PanoramaCaster) once a panorama scan was asked for
         self._extra_cameras = None  # sim.extra_cameras.ExtraCameras once add_cameras was called
+        # ... or, when the render process draws them: (how many add_cameras calls, their yaws), and their poses
+        self._extra_request, self._extra_poses, self._extra_calls = (), (), 0
         self._lidar_without_gl = False  # a panorama scan found no OpenGL: "auto" casts rays
         try:
             self.reset()
@@ -200,6 +202,7 @@ class World:
         if getattr(self, "_extra_cameras", None) is not None:
             self._extra_cameras.release()
             self._extra_cameras = None
+        self._extra_request, self._extra_poses = (), ()
         for cid in (self._client, self._query_client):
             if cid is not None:
                 try:
@@ -375,10 +378,14 @@ class World:
     def render_at(self, pos, quat, people) -> tuple:
         """Pose the drone at (pos, quat) and the people at their ``people_poses`` and render: the
         renderer's raw buffers (nothing is stepped, no noise is drawn)."""
+        self._pose_at(pos, quat, people)
+        return self._render_buffers(self._T_from_pose(pos, quat) @ self.T_body_camera)
+
+    def _pose_at(self, pos, quat, people) -> None:
+        """Place the drone at (pos, quat) and the people at their ``people_poses`` (nothing is stepped)."""
         p.resetBasePositionAndOrientation(self.drone, list(pos), list(quat), physicsClientId=self._client)
         for w, pose in zip(self.walkers, people):
             w.apply_pose(p, pose)
-        return self._render_buffers(self._T_from_pose(pos, quat) @ self.T_body_camera)
 
     def images_at(self, pos, quat, people) -> tuple:
         """``render_at``, then the frame's images as a capture makes them: (depth in mm with the depth
@@ -395,13 +402,16 @@ class World:
         T_true = T_body @ self.T_body_camera
         rp = self._render_proc
         if rp is not None:
-            rp.submit(seq, self.time, pos, quat, self.people_poses(), self.light_direction)
+            rp.submit(seq, self.time, pos, quat, self.people_poses(), self.light_direction, self._extra_request)
             images = None  # asked of the render process at delivery
         elif self.render_on:
             images = self._finish_images(*self._render_buffers(T_true))
         else:  # render=False: the camera's clock and pose only
             images = (self._no_returns, None, None)
-        extra = () if self._extra_cameras is None else self._extra_cameras.render(T_body)
+        if self._extra_cameras is not None:
+            extra = self._extra_cameras.render(T_body)
+        else:  # drawn by the render process (their images come with the first camera's), or none
+            extra = tuple((None, T_rel) for T_rel in self._extra_poses)
         capture = Capture(seq, self.time, images, self._odometry(T_true), T_true, T_body, self.state(),
                           self.obstacle_truth(), extra)
         return self._frames.add(capture, None if rp is None else rp.result)
@@ -410,17 +420,31 @@ class World:
 
     def add_cameras(self, yaws) -> None:
         """Give the drone more cameras like the first, turned about the body's z axis by ``yaws`` [deg]
-        (sim.extra_cameras: depth only, drawn in this process with the gl renderer; GLUnavailable without
-        OpenGL). From the next capture on, each frame delivered has theirs in ``latest_extra_frames``, taken
-        at its instant. The first camera's frames, and everything else, are as without them."""
+        (sim.extra_cameras: depth only, drawn with the gl renderer, by the render process when it renders
+        with it, else in this process; GLUnavailable without OpenGL). From the next capture on, each frame
+        delivered has theirs in ``latest_extra_frames``, taken at its instant, the same images wherever
+        they were drawn. The first camera's frames, and everything else, are as without them."""
         if self._extra_cameras is not None:
             self._extra_cameras.release()
             self._extra_cameras = None
-        if len(yaws):
+        self._extra_request, self._extra_poses = (), ()
+        self._extra_calls += 1
+        rp = self._render_proc
+        if len(yaws) and rp is not None and rp.renderer == "gl":
+            # the child builds them as below in its copy of this world (the same noise streams)
+            self._extra_request = (self._extra_calls, tuple(float(y) for y in yaws))
+            self._extra_poses = tuple(in_first_camera(self.T_body_camera, yaws))
+        elif len(yaws):
             sc = self.scenario
             self._extra_cameras = ExtraCameras(p, self._client, self.intrinsics, sc.camera,
                                                DepthNoiseModel(sc.noise, sc.camera.fx), self.seed, yaws,
                                                self.T_body_camera)
+
+    def extra_images_at(self, pos, quat, people) -> tuple[np.ndarray, ...]:
+        """The other cameras' depth images (``add_cameras``; uint16 mm with their noise) with the drone at
+        (pos, quat) and the people at their ``people_poses``: the render process's entry, as ``images_at``."""
+        self._pose_at(pos, quat, people)
+        return tuple(d for d, _ in self._extra_cameras.render(self._T_from_pose(pos, quat)))
 
     def latest_extra_frames(self) -> tuple[SensorFrame, ...]:
         """The other cameras' frames (``add_cameras``) of the capture ``latest_frame`` comes from."""

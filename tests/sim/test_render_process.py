@@ -156,3 +156,29 @@ def test_a_render_process_stalled_mid_answer_is_a_clear_error(monkeypatch):
                     w.step(REF)
         finally:
             os.kill(rp._proc.pid, signal.SIGCONT)
+
+
+def _rig_frames(steps: int, **kw) -> list:
+    """(frame, the other cameras' frames) for each frame ``step`` returned, cameras looking back and left."""
+    out = []
+    with World(load_scenario("crossing"), seed=3, frame_latency=1, renderer="gl", **kw) as w:
+        w.add_cameras([180.0, 90.0])
+        for _ in range(steps):
+            f = w.step(REF)
+            if f is not None:
+                out.append((f, w.latest_extra_frames()))
+    return out
+
+
+def test_the_render_process_draws_the_other_cameras_bit_identically():
+    here = _rig_frames(48, render_process=False)
+    beside = _rig_frames(48, render_process=True)
+    assert len(here) == len(beside) == 12
+    assert here[0][1] == () and beside[0][1] == ()  # frame 0 was captured before the cameras were added
+    for (fa, ea), (fb, eb) in zip(here[1:], beside[1:]):
+        assert np.array_equal(fa.depth, fb.depth) and len(ea) == len(eb) == 2
+        for a, b in zip(ea, eb):
+            assert a.seq == b.seq == fa.seq and a.stamp == b.stamp
+            assert np.array_equal(a.depth, b.depth) and np.array_equal(a.T_world_camera, b.T_world_camera)
+    back, left = here[-1][1]
+    assert back.depth.any() and not np.array_equal(back.depth, left.depth)
