@@ -4,9 +4,9 @@ The first camera is the world's (its renderer, render process, colour and segmen
 drawn where it is (in the render process when the world has one that renders with the gl renderer, else
 in the world's own process) with the gl renderer (sim.gl_renderer, depth only, one pass per camera from
 one read of the scene's poses) at the same capture instants, from the same body pose, each turned about
-the body's z axis by its yaw. Each camera draws its depth noise (sim.depth_noise, the scenario's model) from its own
-stream, so the first camera's frames are the same whatever else the rig holds. They carry no colour and
-no segmentation: DODT's depth detectors read depth alone.
+the body's z axis by its yaw. Each camera draws its depth noise (sim.depth_noise, the scenario's model)
+from its own stream, so the first camera's frames are the same whatever else the rig holds. They carry
+no colour and no segmentation: DODT's depth detectors read depth alone.
 """
 from __future__ import annotations
 

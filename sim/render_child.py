@@ -2,8 +2,8 @@
 
 It builds its own copy of each world the parent asks for and answers the parent's frames over the socket
 FD (with the rig's other cameras' depth images when the parent asks for them); it ends itself when the
-process PARENT_PID is gone (sim.parent_watch). Nothing imports this module:
-only the child runs it, so the parent's side does not depend on sim.world.
+process PARENT_PID is gone (sim.parent_watch). Nothing imports this module: only the child runs it, so
+the parent's side does not depend on sim.world.
 """
 from __future__ import annotations
 
