@@ -102,7 +102,8 @@ class FrameQueue:
             if images is None:  # rendered beside us, the noise drawn there (in capture order, as in one process)
                 images = fetch(c.seq)
             depth_mm, color, seg = images[:3]
-            drawn_beside = iter(images[3:])
+            drawn_beside = iter(images[3:])  # the other cameras' images, when the render process drew them
+            extra = [(next(drawn_beside) if d is None else d, T_rel) for d, T_rel in c.extra]
             self.frame = SensorFrame(depth=depth_mm, color=color, intrinsics=self.intrinsics,
                                      T_world_camera=c.T_odom, stamp=c.stamp, seq=c.seq)
             self.truth = GroundTruth(stamp=c.stamp, seq=c.seq, obstacles=c.obstacles, T_world_camera=c.T_true,
@@ -110,7 +111,6 @@ class FrameQueue:
                                      segmentation=seg, T_world_body=c.T_body)
             self.extra = tuple(SensorFrame(depth=d, color=None, intrinsics=self.intrinsics,
                                            T_world_camera=c.T_odom @ T_rel, stamp=c.stamp, seq=c.seq)
-                               for d, T_rel in ((next(drawn_beside) if d is None else d, T_rel)
-                                                for d, T_rel in c.extra))
+                               for d, T_rel in extra)
             delivered = self.frame
         return delivered
