@@ -158,21 +158,25 @@ def test_a_render_process_stalled_mid_answer_is_a_clear_error(monkeypatch):
             os.kill(rp._proc.pid, signal.SIGCONT)
 
 
-def _rig_frames(steps: int, **kw) -> list:
-    """(frame, the other cameras' frames) for each frame ``step`` returned, cameras looking back and left."""
+def _rig_frames(steps: int, **kw) -> tuple[list, bool]:
+    """(frame, the other cameras' frames) for each frame ``step`` returned, cameras looking back and left;
+    and whether the render process drew the other cameras (none were drawn in this process)."""
     out = []
     with World(load_scenario("crossing"), seed=3, frame_latency=1, renderer="gl", **kw) as w:
         w.add_cameras([180.0, 90.0])
+        drawn_beside = w._extra_cameras is None
         for _ in range(steps):
             f = w.step(REF)
             if f is not None:
                 out.append((f, w.latest_extra_frames()))
-    return out
+    return out, drawn_beside
 
 
 def test_the_render_process_draws_the_other_cameras_bit_identically():
-    here = _rig_frames(48, render_process=False)
-    beside = _rig_frames(48, render_process=True)
+    here, in_child = _rig_frames(48, render_process=False)
+    assert not in_child
+    beside, in_child = _rig_frames(48, render_process=True)
+    assert in_child
     assert len(here) == len(beside) == 12
     assert here[0][1] == () and beside[0][1] == ()  # frame 0 was captured before the cameras were added
     for (fa, ea), (fb, eb) in zip(here[1:], beside[1:]):
