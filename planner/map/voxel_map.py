@@ -353,6 +353,20 @@ def _column_any(L, l_occ, k0, k1):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _column_any_at_most(L, value, k0, k1):
+    """(nx, ny) bool: any of L[i, j, k0:k1 + 1] <= value (one pass, no (nx, ny, nk) temporary)."""
+    nx, ny = L.shape[0], L.shape[1]
+    out = np.zeros((nx, ny), np.bool_)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(k0, k1 + 1):
+                if L[i, j, k] <= value:
+                    out[i, j] = True
+                    break
+    return out
+
+
 class VoxelMap:
     """Occupancy grid over [origin, origin + size); voxel (i, j, k) covers origin + res*[i, i+1) per axis.
 
@@ -631,8 +645,7 @@ class VoxelMap:
         key = ("unobserved", k0, k1)
         col = self._columns.get(key)
         if col is None:  # unknown voxels hold l_unknown exactly; observed ones float32(l_min) or more
-            col = np.any(self.log_odds[:, :, k0:k1 + 1] <= self.l_unknown, axis=2) if k1 >= k0 else np.zeros(
-                tuple(self.dims[:2]), bool)
+            col = _column_any_at_most(self.log_odds, self.l_unknown, k0, k1)
             col.flags.writeable = False
             self._columns[key] = col
         return col

@@ -459,6 +459,26 @@ def test_column_bands_and_occupied_centres_equal_the_direct_computations(height)
         np.testing.assert_array_equal(m.occupied_centers(lo, hi), want)
 
 
+
+def test_column_unobserved_equals_the_direct_computation():
+    """The compiled scan of never-observed voxels against the plain numpy definition, every band."""
+    rng = np.random.default_rng(1)
+    m = VoxelMap(MapConfig(origin=(-1, -1, -0.1), size=(2.0, 1.5, 3.0)))
+    m.set_known(rng.random(m.log_odds.shape) < 0.05)
+    m.log_odds[rng.random(m.log_odds.shape) < 0.3] = m.l_unknown
+    m.version += 1
+    nz = int(m.dims[2])
+    checked = 0
+    for k0 in range(-2, nz + 2):
+        for k1 in range(k0 - 1, nz + 2, 3):
+            a, b = max(k0, 0), min(k1, nz - 1)
+            want = np.any(m.log_odds[:, :, a:b + 1] <= m.l_unknown, axis=2) if b >= a else np.zeros(
+                m.log_odds.shape[:2], bool)
+            got = m.column_unobserved(-0.05 + 0.1 * k0, -0.05 + 0.1 * k1)
+            np.testing.assert_array_equal(got, want)
+            checked += bool(want.any()) and not want.all()
+    assert checked > 10  # bands with some columns unobserved and some not
+
 def test_several_views_are_one_update_each_view_cast_in_turn():
     back = camera_pose(yaw=np.pi)
     behind = (np.array([-1.83, -3.97, 0.0]), np.array([-1.53, 3.97, 2.6]))  # off the grid, as WALL
