@@ -20,7 +20,9 @@ for IPOPT's linear solver, and the limits become bounds on w).
         ellipse, so the guide picks the passing side as its linearisation does for the QP.
     Static structure: the OSQP MPC's separating planes (5) at the guide (linear rows), on ss_k.
 One ``nlpsol`` (SX expressions) per bucket of obstacle counts, all built at construction; every call only
-passes parameters, bounds and the initial guess (the guide's, else the previous solution shifted).
+passes parameters, bounds and the initial guess (the guide's, else the previous solution shifted). With no
+moving obstacle the problem is a convex QP (quadratic cost, rows linear in w), and its bucket is a ``qpsol``
+(CasADi's OSQP interface, polished) instead: the same optimum, found several times faster than by IPOPT.
 
 The solver is a drop-in for planner.mpc.solver.MPC (same ``solve`` and result); the navigator uses it
 when built with ``solver="nmpc"`` (``--planner nmpc``).
@@ -55,8 +57,8 @@ def _buckets(cfg: MPCConfig) -> tuple[int, ...]:
 
 
 def _build(cfg: MPCConfig, ncfg: NMPCConfig, J: int):
-    """The NLP (module docstring) with rows for J moving obstacles, as one ``nlpsol``; returns (solver,
-    parameter offsets, row offsets). Variables w = [u (3 N), sd (N), ss (N), x (6 N)]: the states x_k =
+    """The NLP (module docstring) with rows for J moving obstacles, as one ``nlpsol`` (a ``qpsol`` for J = 0);
+    returns (solver, parameter offsets, row offsets). Variables w = [u (3 N), sd (N), ss (N), x (6 N)]: the states x_k =
     (p_k, v_k), k = 1..N, are variables tied by the dynamics' equality rows (sparse derivatives, which IPOPT's
     linear solver factorises fast), so the speed and altitude limits are bounds on w, not rows."""
     N, Ks, dt = cfg.horizon, cfg.static_per_step, cfg.dt
@@ -96,7 +98,12 @@ def _build(cfg: MPCConfig, ncfg: NMPCConfig, J: int):
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": ncfg.max_iter,
             "ipopt.tol": ncfg.tol, "ipopt.nlp_scaling_method": "gradient-based", "ipopt.fast_step_computation": "yes",
             "error_on_fail": False}
-    return ca.nlpsol(f"nmpc{J}", "ipopt", {"x": w, "p": params, "f": cost, "g": g}, opts), lay, rows
+    nlp = {"x": w, "p": params, "f": cost, "g": g}
+    if J == 0:  # a convex QP: OSQP, to well inside IPOPT's tolerance, then polished on the active set
+        qp_opts = {"error_on_fail": False, "osqp": {"verbose": False, "eps_abs": 1e-5, "eps_rel": 1e-5,
+                                                    "polish": True, "max_iter": cfg.max_iter}}
+        return ca.qpsol("nmpc0", "osqp", nlp, qp_opts), lay, rows
+    return ca.nlpsol(f"nmpc{J}", "ipopt", nlp, opts), lay, rows
 
 
 def _spans_band(cfg: MPCConfig, o, ax) -> np.ndarray:
@@ -251,9 +258,9 @@ class NMPC:
         w0 = np.r_[acc0.ravel(), np.zeros(2 * N), np.hstack([pos0[1:], vel0[1:]]).ravel()]  # x_k need not follow u_k
         sol = solver(x0=w0, p=P, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx)
         st = solver.stats()
-        iters = int(st.get("iter_count", 0))
+        iters = max(int(st.get("iter_count", 0)), 0)  # the QP interface reports none (-1)
         w = np.array(sol["x"]).ravel()
-        if st.get("return_status") not in _OK:
+        if not (st.get("success") if J == 0 else st.get("return_status") in _OK):
             return self._fallback(t0, p0, v0, str(st.get("return_status", "failed")).lower(), tic, iters, ignored)
         if not np.all(np.isfinite(w)):
             return self._fallback(t0, p0, v0, "nonfinite_solution", tic, iters, ignored)

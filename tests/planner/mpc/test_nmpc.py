@@ -44,7 +44,7 @@ def test_free_space_tracks_the_reference_on_its_coarser_grid_and_ends_at_rest():
     p, goal = np.array([0.0, 0.0, 1.2]), np.array([30.0, 0.0, 1.2])
     p_ref, v_ref = line_ref(p, goal)
     r = nm.solve(0.0, p, np.array([1.5, 0.0, 0.0]), np.zeros(3), p_ref, v_ref)
-    assert r.status == "solved" and r.iterations > 0
+    assert r.status == "solved"
     tr = r.trajectory
     assert tr.dt == pytest.approx(0.2) and tr.positions.shape == (nm.N + 1, 3)
     assert_feasible(tr)
@@ -54,6 +54,24 @@ def test_free_space_tracks_the_reference_on_its_coarser_grid_and_ends_at_rest():
     fine = NMPC(ncfg=NMPCConfig(stride=1)).solve(0.0, p, np.array([1.5, 0.0, 0.0]), np.zeros(3), p_ref, v_ref)
     assert fine.status == "solved" and fine.trajectory.dt == pytest.approx(CFG.dt)
     assert_feasible(fine.trajectory)
+
+
+def test_without_people_the_qp_gives_ipopts_optimum():
+    """With no moving obstacle the problem is a convex QP, solved by OSQP (qpsol): the same plan as IPOPT's on
+    the same problem (the one-person bucket, its rows left inactive), beside a wall and from a turn."""
+    p, goal = np.array([0.0, 0.3, 1.1]), np.array([6.0, 1.5, 1.4])
+    p_ref, v_ref = line_ref(p, goal)
+    wall = np.array([[x, 1.2, z] for x in np.arange(1.0, 4.0, 0.1) for z in np.arange(0.8, 1.8, 0.1)])
+    args = (0.0, p, np.array([1.0, -0.8, 0.2]), np.array([0.5, 0.0, 0.0]), p_ref, v_ref)
+    qp, nlp = NMPC(), NMPC()
+    nlp._problems[0] = nlp._problems[1]
+    a = qp.solve(*args, static_points=wall, geofence=(np.array([-1.0, -2.0]), np.array([20.0, 2.0])))
+    b = nlp.solve(*args, static_points=wall, geofence=(np.array([-1.0, -2.0]), np.array([20.0, 2.0])))
+    assert a.status == b.status == "solved" and b.iterations > 0
+    free = qp.solve(*args, geofence=(np.array([-1.0, -2.0]), np.array([20.0, 2.0])))
+    assert np.abs(free.trajectory.positions - a.trajectory.positions).max() > 0.2  # the wall's planes bind
+    np.testing.assert_allclose(a.trajectory.accelerations, b.trajectory.accelerations, atol=2e-3)
+    np.testing.assert_allclose(a.trajectory.positions, b.trajectory.positions, atol=1e-3)
 
 
 def test_head_on_walker_is_passed_outside_the_exact_ellipse():
