@@ -58,9 +58,9 @@ def _buckets(cfg: MPCConfig) -> tuple[int, ...]:
 
 def _build(cfg: MPCConfig, ncfg: NMPCConfig, J: int):
     """The NLP (module docstring) with rows for J moving obstacles, as one ``nlpsol`` (a ``qpsol`` for J = 0);
-    returns (solver, parameter offsets, row offsets). Variables w = [u (3 N), sd (N), ss (N), x (6 N)]: the states x_k =
-    (p_k, v_k), k = 1..N, are variables tied by the dynamics' equality rows (sparse derivatives, which IPOPT's
-    linear solver factorises fast), so the speed and altitude limits are bounds on w, not rows."""
+    returns (solver, parameter offsets, row offsets). Variables w = [u (3 N), sd (N), ss (N), x (6 N)]: the
+    states x_k = (p_k, v_k), k = 1..N, are variables tied by the dynamics' equality rows (sparse derivatives,
+    which IPOPT's linear solver factorises fast), so the speed and altitude limits are bounds on w, not rows."""
     N, Ks, dt = cfg.horizon, cfg.static_per_step, cfg.dt
     u, sd, ss, x = ca.SX.sym("u", 3, N), ca.SX.sym("sd", N), ca.SX.sym("ss", N), ca.SX.sym("x", 6, N)
     p0, v0, a0 = ca.SX.sym("p0", 3), ca.SX.sym("v0", 3), ca.SX.sym("a0", 3)
