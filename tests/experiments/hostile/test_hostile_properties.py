@@ -4,6 +4,7 @@ exception. Derandomized: the same examples on every run."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -62,6 +63,23 @@ def test_any_perception_output_is_accepted_whole_or_refused_naming_a_field(out):
         assert np.all(np.isfinite(np.asarray(o.center, dtype=float)))
     for tr in good.tracks:
         assert isinstance(tr, TrackReport)
+        json.dumps(tr.to_json(), allow_nan=False)  # what the log writes: a track accepted is writable
+
+
+_FINITE3 = st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=3, max_size=3).map(np.array)
+
+
+@_SETTINGS
+@given(st.builds(lambda oid, c, s, v, dyn, co, acc, age, person, fv: TrackReport(
+    id=oid, center=c, size=s, velocity=v, dynamic=dyn, coasting=co, acceleration=acc, age=age, is_person=person,
+    filter_velocity=fv), st.integers(-2**63, 2**63 - 1), _FINITE3, _FINITE3, _FINITE3, st.booleans(), st.booleans(),
+    st.one_of(st.none(), _FINITE3), st.one_of(st.none(), st.floats(allow_nan=False, allow_infinity=False)),
+    st.one_of(st.none(), st.booleans()), st.one_of(st.none(), _FINITE3)))
+def test_every_well_formed_track_is_accepted_and_writable(tr):
+    """The guard does not serialise a plain TrackReport to check it: its checked fields must make it
+    writable, at any magnitude."""
+    good = check_output(PerceptionOutput(stamp=0.0, obstacles=(), clear_boxes=(), tracks=(tr,)))
+    json.dumps(good.tracks[0].to_json(), allow_nan=False)
 
 
 _TRAJECTORIES = st.builds(
