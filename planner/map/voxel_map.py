@@ -340,28 +340,14 @@ def _occupied_centres_bits(bits, a, b, origin, res):
 
 
 @njit(cache=True, nogil=True)
-def _column_any(L, l_occ, k0, k1):
-    """(nx, ny) bool: any of L[i, j, k0:k1 + 1] >= l_occ."""
+def _column_any(L, value, k0, k1, at_most=False):
+    """(nx, ny) bool: any of L[i, j, k0:k1 + 1] >= value (<= value when ``at_most``), in one pass."""
     nx, ny = L.shape[0], L.shape[1]
     out = np.zeros((nx, ny), np.bool_)
     for i in range(nx):
         for j in range(ny):
             for k in range(k0, k1 + 1):
-                if L[i, j, k] >= l_occ:
-                    out[i, j] = True
-                    break
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _column_any_at_most(L, value, k0, k1):
-    """(nx, ny) bool: any of L[i, j, k0:k1 + 1] <= value (one pass, no (nx, ny, nk) temporary)."""
-    nx, ny = L.shape[0], L.shape[1]
-    out = np.zeros((nx, ny), np.bool_)
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(k0, k1 + 1):
-                if L[i, j, k] <= value:
+                if (L[i, j, k] <= value) if at_most else (L[i, j, k] >= value):
                     out[i, j] = True
                     break
     return out
@@ -645,7 +631,7 @@ class VoxelMap:
         key = ("unobserved", k0, k1)
         col = self._columns.get(key)
         if col is None:  # unknown voxels hold l_unknown exactly; observed ones float32(l_min) or more
-            col = _column_any_at_most(self.log_odds, self.l_unknown, k0, k1)
+            col = _column_any(self.log_odds, self.l_unknown, k0, k1, True)
             col.flags.writeable = False
             self._columns[key] = col
         return col
