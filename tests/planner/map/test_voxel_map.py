@@ -459,7 +459,6 @@ def test_column_bands_and_occupied_centres_equal_the_direct_computations(height)
         np.testing.assert_array_equal(m.occupied_centers(lo, hi), want)
 
 
-
 def test_column_unobserved_equals_the_direct_computation():
     """The compiled scan of never-observed voxels against the plain numpy definition, every band."""
     rng = np.random.default_rng(1)
@@ -478,6 +477,7 @@ def test_column_unobserved_equals_the_direct_computation():
             np.testing.assert_array_equal(got, want)
             checked += bool(want.any()) and not want.all()
     assert checked > 10  # bands with some columns unobserved and some not
+
 
 def test_several_views_are_one_update_each_view_cast_in_turn():
     back = camera_pose(yaw=np.pi)

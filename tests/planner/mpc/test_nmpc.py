@@ -63,12 +63,13 @@ def test_without_people_the_qp_gives_ipopts_optimum():
     p_ref, v_ref = line_ref(p, goal)
     wall = np.array([[x, 1.2, z] for x in np.arange(1.0, 4.0, 0.1) for z in np.arange(0.8, 1.8, 0.1)])
     args = (0.0, p, np.array([1.0, -0.8, 0.2]), np.array([0.5, 0.0, 0.0]), p_ref, v_ref)
+    fence = (np.array([-1.0, -2.0]), np.array([20.0, 2.0]))
     qp, nlp = NMPC(), NMPC()
     nlp._problems[0] = nlp._problems[1]
-    a = qp.solve(*args, static_points=wall, geofence=(np.array([-1.0, -2.0]), np.array([20.0, 2.0])))
-    b = nlp.solve(*args, static_points=wall, geofence=(np.array([-1.0, -2.0]), np.array([20.0, 2.0])))
+    a = qp.solve(*args, static_points=wall, geofence=fence)
+    b = nlp.solve(*args, static_points=wall, geofence=fence)
     assert a.status == b.status == "solved" and b.iterations > 0
-    free = qp.solve(*args, geofence=(np.array([-1.0, -2.0]), np.array([20.0, 2.0])))
+    free = qp.solve(*args, geofence=fence)
     assert np.abs(free.trajectory.positions - a.trajectory.positions).max() > 0.2  # the wall's planes bind
     np.testing.assert_allclose(a.trajectory.accelerations, b.trajectory.accelerations, atol=2e-3)
     np.testing.assert_allclose(a.trajectory.positions, b.trajectory.positions, atol=1e-3)
