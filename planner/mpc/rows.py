@@ -136,7 +136,9 @@ def _planes(c, o, ax, side, p0, bias, z_min, z_max, n_out, b_out):
 def slide_clear(cfg: MPCConfig, c, PT, d2, req, side):
     """Move each c_k along +-side (the shorter way, left on ties) to the nearest spot at least req from
     every point; q blocks the shifts sgn*(q - c).side +- sqrt(req^2 - |q - c|_perp^2) (d2 = |q - c|^2).
-    Where no spot lies within static_radius, c_k stays."""
+    Where no spot lies within req plus a voxel, c_k stays: such a spot lies beyond the structure on either
+    side (c_k in a gap narrower than twice req), and planes facing it would bar the gap; from c_k itself
+    they ask only the room the gap lacks."""
     along = (side @ PT)[None] - (c @ side)[:, None]
     perp2 = d2 - along ** 2
     keep = np.any(perp2 < req * req, axis=0)
@@ -144,7 +146,7 @@ def slide_clear(cfg: MPCConfig, c, PT, d2, req, side):
     h = np.sqrt(np.maximum(req * req - perp2, 0.0))
     shift = _shifts(np.ascontiguousarray(along), np.ascontiguousarray(perp2), np.ascontiguousarray(h), req)
     s = np.where(shift[0] <= shift[1], shift[0], -shift[1])
-    return c + np.where(np.abs(s) <= cfg.static_radius, s, 0.0)[:, None] * side
+    return c + np.where(np.abs(s) <= req + cfg.voxel_size, s, 0.0)[:, None] * side
 
 
 @njit(cache=True, nogil=True)
@@ -239,12 +241,12 @@ def static_rows(cfg: MPCConfig, c, pts, side, p0):
         c[pen] = slide_clear(cfg, c[pen], PT, d2[pen], req, side)
         d2[pen] = sqdist(c[pen])
     _greedy_planes(np.ascontiguousarray(c, dtype=float), np.ascontiguousarray(pts, dtype=float), d2,
-                   np.asarray(p0, float), np.asarray(side, float), r, req, n_out, b_out)
+                   np.asarray(p0, float), np.asarray(side, float), r, req, cfg.voxel_size, n_out, b_out)
     return n_out, b_out
 
 
 @njit(cache=True, nogil=True)
-def _greedy_planes(c, pts, d2, p0, side, r, req, n_out, b_out):
+def _greedy_planes(c, pts, d2, p0, side, r, req, through, n_out, b_out):
     """static_rows' planes into n_out (N, Ks, 3), b_out (N, Ks): for each c_k, Ks times, the nearest point q
     not yet covered (within r; d2 (N, M): |c_k - q|^2) gives the plane through q, normal from q toward
     c_k, moved out by req; the points behind that plane are covered."""
@@ -268,15 +270,16 @@ def _greedy_planes(c, pts, d2, p0, side, r, req, n_out, b_out):
             n0, n1, n2 = c[k, 0] - q0, c[k, 1] - q1, c[k, 2] - q2
             # A linearisation point beyond the voxel, seen from the drone (the previous plan went through
             # a wall on slack), would give a plane keeping the plan beyond the wall: where the straight line
-            # from the drone to c_k passes within the clearance of q, orient the plane from the drone's
-            # position instead, which is on the free side. (A plan through a gap passes its edge voxels
-            # farther than that and keeps its planes.)
+            # from the drone to c_k passes through q's voxel (within ``through``), orient the plane from the
+            # drone's position instead, which is on the free side. A line that only passes near q (a plan
+            # rounding a corner, or through a gap narrower than twice the clearance) keeps its plane: from
+            # the drone's side, it would bar the way the plan goes.
             s0, s1, s2 = c[k, 0] - p0[0], c[k, 1] - p0[1], c[k, 2] - p0[2]
             w = ((q0 - p0[0]) * s0 + (q1 - p0[1]) * s1 + (q2 - p0[2]) * s2) / max(s0 * s0 + s1 * s1 + s2 * s2, 1e-12)
             w = min(max(w, 0.0), 1.0)
             e0, e1, e2 = p0[0] + w * s0 - q0, p0[1] + w * s1 - q1, p0[2] + w * s2 - q2
             a0, a1, a2 = p0[0] - q0, p0[1] - q1, p0[2] - q2
-            if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) < req and n0 * a0 + n1 * a1 + n2 * a2 < 0.0:
+            if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) < through and n0 * a0 + n1 * a1 + n2 * a2 < 0.0:
                 n0, n1, n2 = a0, a1, a2
             nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
             if nn < 1e-9:  # c_k on a voxel centre (no clear spot found): left

@@ -22,7 +22,9 @@ slack per step, both >= 0 and in metres.
         n = (c_k - q)/|c_k - q| for the nearest q, n.p_k + ss_k >= n.q + robot_radius + voxel/2 + margin,
         points behind the plane through q are dropped, repeat up to K_s times. Where c_k is closer than
         that to a voxel (the previous plan runs through it), c_k is first slid sideways to the nearest
-        clear spot: planes from a clear point are consistent (it satisfies them all) and lead around.
+        clear spot: planes from a clear point are consistent (it satisfies them all) and lead around. In a
+        gap narrower than twice that clearance no clear spot lies near, and c_k stays: its planes ask
+        only the room the gap lacks, on slack, instead of facing a spot beyond the gap's sides.
     (6) Optional geofence (the known walls of the flight area): g (p_k,xy - lo - r) + ss_k >= 0 and
         g (hi - r - p_k,xy) + ss_k >= 0, r = geofence_margin, g = geofence_scale: the side walls, which a
         forward camera sees only at a grazing angle; a violation costs g times the static slack.

@@ -295,3 +295,35 @@ def test_a_solution_shifted_in_time_moves_every_block_and_repeats_its_last_step(
                 np.testing.assert_array_equal(got, np.vstack([b[s:], np.repeat(b[-1:], s, axis=0)]))
                 inside[off:off + N * w] = True
             np.testing.assert_array_equal(out[~inside], vec[~inside])
+
+
+def _gap_beside_a_box():
+    """A box (x 6.3-6.9, y -0.8 to -0.2, voxel centres every 0.1 m) and a side wall at y -2: a gap of 1.2 m,
+    less than twice the clearance the MPC keeps with a 0.437 m drone (0.687 m from voxel centres)."""
+    g = np.arange(0.05, 2.0, 0.1)
+    X, Y, Z = np.meshgrid(np.arange(6.35, 6.9, 0.1), np.arange(-0.75, -0.2, 0.1), g)
+    box = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    X, Z = np.meshgrid(np.arange(4.05, 9.0, 0.1), g)
+    wall = np.column_stack([X.ravel(), np.full(X.size, -2.05), Z.ravel()])
+    return np.vstack([box, wall])
+
+
+def test_a_guide_through_a_gap_narrower_than_twice_the_clearance_is_followed():
+    """The guide goes down into the gap beside the box and out past it. The planes of the steps beyond the
+    box, whose straight line from the drone passes near the box's corner without entering it, face the
+    guide: the plan follows it through instead of stopping at the mouth on the planes of the drone's side."""
+    cfg = MPCConfig(robot_radius=0.437)
+    pts = _gap_beside_a_box()
+    knots = np.array([[5.2, -1.05], [5.9, -1.40], [7.3, -1.40], [8.6, -0.6]])
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(knots, axis=0), axis=1))]
+    sk = 0.8 * cfg.dt * np.arange(1, cfg.horizon + 1)
+    guide = np.column_stack([np.interp(sk, s, knots[:, 0]), np.interp(sk, s, knots[:, 1]), np.full(cfg.horizon, 1.2)])
+    v_ref = np.diff(np.vstack([[5.2, -1.05, 1.2], guide]), axis=0) / cfg.dt
+    r = MPC(cfg).solve(0.0, [5.2, -1.05, 1.2], v_ref[0], [0, 0, 0], guide, v_ref, static_points=pts,
+                       geofence=(np.array([0.0, -2.0]), np.array([16.0, 2.0])), guide=guide)
+    assert r.status == "solved"
+    P = r.trajectory.positions
+    assert r.max_slack_static < 0.1
+    assert P[-1, 0] > 6.9  # past the box, as the guide
+    d = np.min(np.linalg.norm(P[:, None, :] - pts[None], axis=2), axis=1)
+    assert d.min() >= cfg.robot_radius + cfg.voxel_size / 2 - 0.01

@@ -9,7 +9,7 @@ from planner.mpc.rows import static_rows
 def _planes_by_definition(cfg, c, pts, side, p0):
     """For each c_k, static_per_step times: the nearest point within static_radius not yet behind a plane
     gives a plane through it facing c_k (from the drone's side when the segment drone -> c_k passes
-    within the clearance of it and c_k lies beyond it), moved out by the clearance."""
+    through its voxel and c_k lies beyond it), moved out by the clearance."""
     req = cfg.robot_radius + cfg.voxel_size / 2 + cfg.static_margin
     N, Ks = cfg.horizon, cfg.static_per_step
     n_out, b_out = np.zeros((N, Ks, 3)), np.full((N, Ks), -np.inf)
@@ -23,7 +23,7 @@ def _planes_by_definition(cfg, c, pts, side, p0):
             nv = c[k] - q
             seg = c[k] - p0
             w = np.clip(np.dot(q - p0, seg) / max(np.dot(seg, seg), 1e-12), 0.0, 1.0)
-            if np.linalg.norm(p0 + w * seg - q) < req and np.dot(nv, p0 - q) < 0:
+            if np.linalg.norm(p0 + w * seg - q) < cfg.voxel_size and np.dot(nv, p0 - q) < 0:
                 nv = p0 - q
             n = nv / np.linalg.norm(nv) if np.linalg.norm(nv) >= 1e-9 else side
             n_out[k, j], b_out[k, j] = n, n @ q + req
