@@ -199,6 +199,7 @@ LIMITS: dict[str, Limit] = {
     "episode.plan_rate": _real(0.1, 1000.0),
     "episode.map_every": _whole(1, 100),  # camera frames per map update
     "episode.max_yaw_rate": _real(0.0, 10.0),  # rad/s; 0: the heading never turns
+    "episode.accel_lead": _real(0.0, 1.0),  # s
     "episode.map_snapshot_period": _real(0.01, 3600.0),  # s
     "episode.duration": _real(0.0, 3600.0, lo_open=True, optional=True),  # s, as experiments.config.check
     "episode.static_map": _one_of(*STATIC_MAPS),

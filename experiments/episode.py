@@ -230,7 +230,8 @@ class _Loop:
         self._header(ctx, config)
         control_dt = world.dt * world.steps_per_control
         plan_every = max(1, int(round(1.0 / (self.cfg.plan_rate * control_dt))))
-        self.follower = TrajectoryFollower(float(self.sc.drone.yaw), self.cfg.max_yaw_rate, control_dt)
+        self.follower = TrajectoryFollower(float(self.sc.drone.yaw), self.cfg.max_yaw_rate, control_dt,
+                                           self.cfg.accel_lead)
         reason, time_to_goal = "timeout", None
         frame, truth = world.latest_frame(), world.ground_truth()  # None until the first frame arrives (latency)
         k = 0

@@ -13,6 +13,10 @@ class EpisodeConfig:
     plan_rate: float = 10.0  # Hz; reference planners replan at 10-20 Hz
     map_every: int = 2  # camera frames per map update: 15 Hz at 30 Hz (reference map timer: 20 Hz)
     max_yaw_rate: float = 1.2  # rad/s, heading changes toward the planner's yaw
+    # s: the controller's acceleration feedforward is the plan's this much ahead (experiments.follower); ours: the
+    # sim's attitude loop (sim.controller, 18 rad/s, damping 0.85) tilts that late, and a stop fed forward without
+    # lead leaves the drone tilted at zero speed, moving back at 0.13-0.18 m/s
+    accel_lead: float = 0.08
     map_snapshot_period: float = 1.0  # s between occupied-voxel snapshots in the log
     duration: float | None = None  # s; None: the scenario's duration
     # "depth": the static map is built from the camera's depth frames (the paper's setup); "truth": it holds
