@@ -5,17 +5,17 @@ import pytest
 
 from conftest import make_scenario
 from experiments.episode_config import EpisodeConfig
+from experiments.fault import AT_REST_SPEED as AT_REST
 from experiments.follower import TrajectoryFollower
 from planner.fallback import braking_1d
 from planner.shield.candidates import roll
 from planner.shield.shield import ShieldConfig
 from planner.types import Trajectory
 from sim import World
-from sim.controller import Reference
+from sim.trajectories import straight_line
 
 SHIELD = ShieldConfig()
-AT_REST = 0.1  # m/s, experiments.fault.AT_REST_SPEED
-CONTROL_DT = 1.0 / 120.0
+CONTROL_DT = 1.0 / 120.0  # s, for the sampling test (it sets only how fast the heading turns)
 
 
 def _ramp(t0=0.0):
@@ -47,20 +47,13 @@ def _speeds_after_stop(speed: float, lead: float) -> np.ndarray:
     the drone's state as the closed loop flies it; the drone's 3D speeds over the 3 s after the stop begins."""
     w = World(make_scenario(""), seed=0, camera=False)
     start = np.array(w.scenario.drone.start, float)
-    ramp = speed / 2.0  # reach the speed at 2 m/s^2
-
-    def cruise(t):
-        if t < ramp:
-            return Reference(position=start + [t * t, 0, 0], velocity=np.array([2 * t, 0, 0]),
-                             acceleration=np.array([2.0, 0, 0]), yaw=0.0, yaw_rate=0.0)
-        return Reference(position=start + [ramp * ramp + speed * (t - ramp), 0, 0],
-                         velocity=np.array([speed, 0, 0]), acceleration=np.zeros(3), yaw=0.0, yaw_rate=0.0)
-
-    while w.time < ramp + 1.5:
+    cruise, _ = straight_line(start, start + [100.0, 0.0, 0.0], speed, accel=2.0)
+    while w.time < speed / 2.0 + 1.5:  # speeding up, then 1.5 s at the speed
         w.step(cruise(w.time))
-    follower, speeds = TrajectoryFollower(0.0, 1.2, CONTROL_DT, lead), []
-    per_plan = int(round(SHIELD.dt / CONTROL_DT))
-    for step in range(int(3.0 / CONTROL_DT)):
+    control_dt = w.dt * w.steps_per_control
+    follower, speeds = TrajectoryFollower(0.0, 1.2, control_dt, lead), []
+    per_plan = int(round(SHIELD.dt / control_dt))
+    for step in range(int(3.0 / control_dt)):
         s = w.state()
         if step % per_plan == 0:
             m = roll(s.position, s.velocity, np.zeros((1, 2)), SHIELD.commit_time, SHIELD.dt, SHIELD.a_max,
