@@ -21,6 +21,11 @@ points at the planner. Where the plan records also say whom the planner stopped 
 shield's ``forgot``), ``forgot`` is the reason it last dropped a person predicted within ``lost_match``
 metres of this one in the window (planner.shield.shield.FORGET_REASONS), and ``forgot_s`` how long before the
 contact: a person forgotten as "seen_free" a moment before the contact was where the prediction was not.
+``overruled``: the fraction of plans over the window the shield flew instead of the planner's (a status
+``shield:...``): a drone walked into at rest after its stops and holds. For a person collision,
+``flanked``: whether, ``flank_lead`` seconds before the contact, another person within ``flank_range`` of
+the drone lay more than the fault rule's behind angle (120 deg) from this one as seen from the drone: one
+ahead, one behind, every sideways motion toward both, and passive safety leaves only the hold.
 """
 from __future__ import annotations
 
@@ -31,7 +36,7 @@ import numpy as np
 
 from dodt.frames import CameraIntrinsics
 from dodt.geometry import half_view, wrap_angle
-from experiments.fault import AT_REST_SPEED, classify
+from experiments.fault import AT_REST_SPEED, BEHIND_ANGLE, classify
 
 
 def logged_half_view(header: dict) -> float:
@@ -76,7 +81,8 @@ def logged_view_test(header: dict, half_fov: float | None = None):
 
 
 def collision_rows(records: list[dict], window: float = 2.0, view_range: float = 5.0, match: float = 0.5,
-                   half_fov: float | None = None, lost_match: float = 1.2) -> list[dict]:
+                   half_fov: float | None = None, lost_match: float = 1.2, flank_range: float = 1.6,
+                   flank_lead: float = 0.5) -> list[dict]:
     """The collisions of one episode's records, as dicts (see the module docstring). ``half_fov``
     (rad): the camera's half view; None: the logged camera's (logged_half_view)."""
     header = records[0]
@@ -84,6 +90,7 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
     states = [r for r in records if r["k"] == "s"]
     frames = [r for r in records if r["k"] == "f"]
     plans = [r for r in records if r["k"] == "plan" and "threats" in r]
+    statuses = [(r["t"], str(r.get("status", ""))) for r in records if r["k"] == "plan"]
     rows = []
     for c in (r for r in records if r["k"] == "collision"):
         t = c["t"]
@@ -97,6 +104,9 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
         if last is not None and float(np.hypot(*v)) > AT_REST_SPEED:  # at rest: no direction of motion
             fwd = _heading(last)
             row["off_heading"] = round(math.degrees(abs(wrap_angle(math.atan2(v[1], v[0]) - fwd))), 1)
+        recent = [st for (pt, st) in statuses if t - window <= pt <= t]
+        if recent:
+            row["overruled"] = round(sum(st.startswith("shield:") for st in recent) / len(recent), 2)
         if c["kind"] == "person" and frames:
             seen, tracked, moving, speeds, where = [], [], [], [], []
             for f in (f for f in frames if t - window <= f["t"] <= t):
@@ -122,10 +132,30 @@ def collision_rows(records: list[dict], window: float = 2.0, view_range: float =
                        reported_moving=round(sum(moving) / n, 2))
             if speeds:
                 row["person_min_speed"] = round(min(speeds), 2)
+            row.update(_flanked(frames, c["other_id"], t - flank_lead, flank_range))
             row.update(_planner_knew(plans, where, t, window))
             row.update(_forgot(plans, where, t, window, lost_match))
         rows.append(row)
     return rows
+
+
+def _flanked(frames: list[dict], pid, t: float, reach: float) -> dict:
+    """flanked of a collision with person ``pid`` (module docstring), from the frame nearest t: {} when
+    that person is not in it or not within reach of the drone."""
+    f = min(frames, key=lambda r: abs(r["t"] - t))
+    p = np.asarray(f["p"], float)[:2]
+    bearings, own = [], None
+    for q in f["people"]:
+        d = _centre(q)[:2] - p
+        if float(np.hypot(*d)) > reach:
+            continue
+        if q["id"] == pid:
+            own = math.atan2(d[1], d[0])
+        else:
+            bearings.append(math.atan2(d[1], d[0]))
+    if own is None:
+        return {}
+    return {"flanked": int(any(abs(wrap_angle(b - own)) > BEHIND_ANGLE for b in bearings))}
 
 
 def _centre_at(where: list[tuple[float, np.ndarray]], t: float) -> np.ndarray:
@@ -183,7 +213,7 @@ def logs_under(path: Path) -> list[Path]:
 def format_table(rows: list[dict]) -> str:
     cols = ["seed", "t", "kind", "other_id", "fault", "drone_speed", "off_heading", "drone_closing",
             "person_closing", "person_min_speed", "in_view", "tracked", "reported_moving", "planner_knew", "known_for",
-            "forgot", "forgot_s"]
+            "forgot", "forgot_s", "overruled", "flanked"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         lines.append("| " + " | ".join("" if r.get(k) is None else str(r[k]) for k in cols) + " |")

@@ -141,3 +141,23 @@ def test_the_view_a_collision_is_judged_in_is_the_logged_rigs():
     yaws, all_round = logged_views({"sensors": [{"kind": "rgbd", "yaw": 0.0}, {"kind": "rgbd", "yaw": 180.0}]})
     assert yaws == [0.0, pytest.approx(math.pi)] and not all_round
     assert logged_views({"sensors": [{"kind": "rgbd", "yaw": 0.0}, {"kind": "lidar", "yaw": 0.0}]}) == ([0.0], True)
+
+
+def test_rows_say_whether_the_shield_flew_instead_and_whether_the_person_had_a_flank():
+    """overruled: the share of plans over the window with a shield status; flanked: 0.5 s before the contact
+    (the frame at 1.5 s: the person 1 m to the drone's right) another person within 1.6 m on the other
+    side, more than 120 deg from the first."""
+    recs = _records()
+    recs += [{"k": "plan", "t": float(t), "status": "solved" if t < 1.0 else "shield:hold"}
+             for t in np.arange(0.0, 2.01, 0.1).round(1)]
+    person, static = collision_rows(recs)
+    assert person["overruled"] == static["overruled"] == pytest.approx(11 / 21, abs=0.005)
+    assert person["flanked"] == 0 and "flanked" not in static  # nobody else near
+    other = {"id": 6, "lo": [-0.25, 0.95, 0.0], "hi": [0.25, 1.45, 1.7], "v": [0.0, 0.0, 0.0]}  # 1.2 m left
+    frame = next(r for r in recs if r["k"] == "f" and r["t"] == 1.5)
+    frame["people"].append(other)
+    assert collision_rows(recs)[0]["flanked"] == 1
+    assert collision_rows(recs, flank_range=1.1)[0]["flanked"] == 0  # beyond the range
+    other["lo"], other["hi"] = [0.75, -0.25, 0.0], [1.25, 0.25, 1.7]  # ahead: 90 deg from the first
+    assert collision_rows(recs)[0]["flanked"] == 0
+    assert "overruled" not in collision_rows(_records())[0]  # no plan records
