@@ -399,6 +399,15 @@ def plan_path(person: Person, scenario: Scenario, rng: np.random.Generator, hori
     return WalkPath(points=round_corners(pts.astype(float)), speed=person.speed, start_delay=person.start_delay)
 
 
+ROUTE_SLACK = 5.0  # s: routes are drawn for the scenario's duration and this much more
+
+
+def walk_paths(scenario: Scenario, rng: np.random.Generator) -> list[WalkPath]:
+    """Every person's route, drawn from ``rng`` in the file's order (the world draws them so)."""
+    horizon = scenario.duration + ROUTE_SLACK
+    return [plan_path(person, scenario, rng, horizon) for person in scenario.people]
+
+
 def person_height(person: Person, rng: np.random.Generator) -> float:
     if person.height is not None:
         return person.height

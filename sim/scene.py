@@ -20,7 +20,7 @@ with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
 
 from sim.ground_truth import STRUCTURE_ID, ObstacleTruth
-from sim.people import HUMANOID_URDF, Walker, person_height, plan_path
+from sim.people import HUMANOID_URDF, Walker, person_height, walk_paths
 from sim.scenario import Scenario
 from sim.scenario_parts import Obstacle
 from sim.vehicle import QUADROTOR_URDF
@@ -93,10 +93,9 @@ def build_scene(scenario: Scenario, client: int, query_client: int, rng_paths: n
     _build_corridor(sc, client, static, rng_looks)
     for i, o in enumerate(sc.obstacles):
         _build_obstacle(o, i + 1, client, static, rng_looks)
-    horizon = sc.duration + 5.0
     walkers, person_ids = [], []
-    for i, person in enumerate(sc.people):
-        w = Walker(plan_path(person, sc, rng_paths, horizon), person_height(person, rng_looks))
+    for i, (person, path) in enumerate(zip(sc.people, walk_paths(sc, rng_paths))):
+        w = Walker(path, person_height(person, rng_looks))
         _build_person(w, person, client, query_client, rng_looks)
         walkers.append(w)
         person_ids.append(len(sc.obstacles) + 1 + i)

@@ -60,6 +60,12 @@ __all__ = ["CLEARANCE_CAP", "CLEARANCE_LOG_LEN", "LIDAR_SEED_TAG", "World"]
 LIDAR_SEED_TAG = 0x11DA2
 
 
+def episode_generators(seed: int) -> tuple[np.random.Generator, ...]:
+    """The generators of one episode, in this order: the people's routes, looks (colours, heights),
+    depth noise and odometry noise. Anything that redraws the routes of an episode uses the first."""
+    return tuple(np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4))
+
+
 def _rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     return np.array(p.getMatrixFromQuaternion(p.getQuaternionFromEuler([roll, pitch, yaw]))).reshape(3, 3)
 
@@ -141,8 +147,7 @@ class World:
             self.seed = int(seed)
             self.scenario = self._template.for_seed(self.seed)
         self.close()
-        ss = np.random.SeedSequence(self.seed)
-        rng_paths, rng_looks, rng_noise, rng_odom = (np.random.default_rng(s) for s in ss.spawn(4))
+        rng_paths, rng_looks, rng_noise, rng_odom = episode_generators(self.seed)
         sc = self.scenario
 
         with quiet_stdout():
