@@ -17,7 +17,7 @@ def add_parsers(sub) -> None:
     viewers.add_parser(sub)  # replay, plot, collisions
     sweeps.add_parser(sub)  # sweep, benchmark, compare, reproduce
     bench.add_parser(sub)  # bench
-    scenarios.add_parser(sub)  # scenarios, validate
+    scenarios.add_parser(sub)  # scenarios, validate, ceiling
     detector.add_parser(sub)  # train-detector, eval-detector, pack-detector-data
 
 

@@ -102,7 +102,7 @@ def test_sweep_renderer_option_reaches_every_episode(monkeypatch, tmp_path, rend
 
 
 COMMANDS = ("run", "simulate", "perceive", "replay", "plot", "collisions", "sweep", "benchmark", "compare",
-            "reproduce", "bench", "scenarios", "validate", "train-detector", "eval-detector", "pack-detector-data")
+            "reproduce", "bench", "scenarios", "validate", "ceiling", "train-detector", "eval-detector", "pack-detector-data")
 
 
 def test_every_command_is_listed_in_the_help(capsys):
