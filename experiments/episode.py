@@ -65,12 +65,7 @@ def _extrapolate(obstacles, stamp: float, now: float) -> tuple[ObstaclePredictio
     lag = max(now - stamp, 0.0)
     if lag == 0.0:
         return tuple(obstacles)
-    out = []
-    for o in obstacles:
-        c = o.predict(np.array([lag]))[0]
-        v = o.velocity + o.acceleration * min(lag, o.accel_horizon)
-        out.append(replace(o, center=c, velocity=v, position_std=float(o.std_at(np.array([lag]))[0])))
-    return tuple(out)
+    return tuple(o.advanced(lag) for o in obstacles)
 
 
 def sensor_yaw(sensor) -> float:

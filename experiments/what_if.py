@@ -23,6 +23,15 @@ Corrected (DODT's reports only, changed):
 knows, with DODT's phantoms, and the map cleared under DODT's dynamic tracks only (the oracle clears it
 under every person it reports).
 
+Foreseen (not DODT at all):
+- ``FutureKnown``: the ``oracle-360`` mode's reports, each predicting the person's true walk instead of a
+  constant acceleration (``KnownFuture``; sim.crowd_future, people who do not see the drone only) and no
+  uncertainty. What a perfect predictor would give the planner; fly it with the maneuvers' other futures
+  off (``--set navigator.maneuvers.p_keep=1 --set navigator.maneuvers.p_turn=0 --set
+  navigator.maneuvers.p_stop=0 --set navigator.maneuvers.worst_case=0``). The shield's discs still
+  extrapolate the velocity. ``known_for`` limits how far ahead the walk is known (constant velocity
+  after).
+
 A person is reported when one of DODT's reports lies within ``match`` (0.6 m) of them horizontally. A
 person added has the truth's centre, size and velocity, no acceleration, and the id ``ADDED_ID`` + theirs.
 Subclass one to change its parameters (a plug-in is built with no arguments).
@@ -30,14 +39,16 @@ Subclass one to change its parameters (a plug-in is built with no arguments).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from dodt.context import EpisodeContext
 from dodt.protocol import PerceptionOutput
-from experiments.perception_modes import DODTPerception, horizontal_view, oracle_view
+from experiments.perception_modes import DODTPerception, OraclePerception, horizontal_view, oracle_view
 from planner.types import ObstaclePrediction
+from sim.crowd_future import blind_walk
+from sim.scenario import load_scenario
 
 ADDED_ID = 100000
 
@@ -186,3 +197,68 @@ class Combined(RecentlyLeft):
 
     def _adds(self, person, in_view, bearing, near_side, truth, frame) -> bool:
         return in_view or super()._adds(person, in_view, bearing, near_side, truth, frame)
+
+
+@dataclass(frozen=True, eq=False)
+class KnownFuture(ObstaclePrediction):
+    """A prediction that is the person's true walk: ``walk_t`` (K,) absolute times and ``walk_xy`` (K, 2)
+    positions, from ``stamp``, the absolute time of ``center``; the height of ``center`` kept. Past the
+    walk's end the person stays at its last place."""
+
+    stamp: float = 0.0
+    walk_t: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    walk_xy: np.ndarray = field(default_factory=lambda: np.zeros((1, 2)))
+    known_for: float = math.inf  # s ahead of now the walk is known; later, its velocity then goes on
+
+    def _at(self, t: np.ndarray) -> np.ndarray:
+        s = np.minimum(t, self.stamp + self.known_for)
+        xy = np.column_stack([np.interp(s, self.walk_t, self.walk_xy[:, 0]),
+                              np.interp(s, self.walk_t, self.walk_xy[:, 1])])
+        late = t > s
+        if np.any(late):
+            h = 0.05
+            v = (self._known(s[late]) - self._known(s[late] - h)) / h
+            xy[late] += v * (t[late] - s[late])[:, None]
+        return xy
+
+    def _known(self, t: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(t, self.walk_t, self.walk_xy[:, 0]),
+                                np.interp(t, self.walk_t, self.walk_xy[:, 1])])
+
+    def predict(self, times: np.ndarray) -> np.ndarray:
+        t = self.stamp + np.asarray(times, dtype=float)
+        xy = self._at(t) + (np.asarray(self.center, float)[:2] - self._at(np.array([self.stamp]))[0])
+        return np.column_stack([xy, np.full(len(t), float(self.center[2]))])
+
+    def advanced(self, lag: float) -> "KnownFuture":
+        c = self.predict(np.array([lag, lag + 0.01]))
+        return replace(self, center=c[0], velocity=(c[1] - c[0]) / 0.01, stamp=self.stamp + lag)
+
+
+class FutureKnown(OraclePerception):
+    """oracle-360 whose every report predicts the person's true walk (module docstring)."""
+
+    known_for = math.inf  # s ahead of each report the walk is known (KnownFuture.known_for)
+
+    def __init__(self):
+        super().__init__(all_around=True, name="future-known")
+        self._walk = None
+
+    def reset(self, context: EpisodeContext | None = None) -> None:
+        super().reset(context)
+        if context is None:
+            self._walk = None
+            return
+        sc = load_scenario(context.scenario, context.seed)
+        t, xy = blind_walk(sc, context.seed, context.duration + 5.0)
+        self._walk = (t, xy, len(sc.obstacles) + 1)  # people's ids follow the obstacles' (sim.scene)
+
+    def update(self, frame, truth=None) -> PerceptionOutput:
+        out = super().update(frame, truth)
+        if self._walk is None:
+            raise ValueError("future-known perception: reset with the episode's context first")
+        t, xy, first = self._walk
+        preds = tuple(KnownFuture(id=o.id, center=o.center, size=o.size, velocity=o.velocity, std_growth=0.0,
+                                  stamp=out.stamp, walk_t=t, walk_xy=xy[:, o.id - first], known_for=self.known_for)
+                      for o in out.obstacles)
+        return replace(out, obstacles=preds)

@@ -93,6 +93,13 @@ class ObstaclePrediction:
         """Position standard deviation at ``times`` seconds ahead (K,)."""
         return self.position_std + self.std_growth * np.asarray(times, dtype=float)
 
+    def advanced(self, lag: float) -> "ObstaclePrediction":
+        """The same prediction made ``lag`` seconds later: centre, velocity and standard deviation as
+        predicted then (the closed loop brings a report from its frame's stamp to a plan's)."""
+        c = self.predict(np.array([lag]))[0]
+        v = self.velocity + self.acceleration * min(lag, self.accel_horizon)
+        return replace(self, center=c, velocity=v, position_std=float(self.std_at(np.array([lag]))[0]))
+
 
 @dataclass(frozen=True, eq=False)
 class Trajectory:

@@ -137,3 +137,50 @@ def _context_with_map():
     from planner.map.voxel_map import VoxelMap
 
     return _replace(example_context(), static_map=VoxelMap())
+
+
+def test_a_known_future_predicts_the_walk_from_its_stamp_and_advances_with_the_clock():
+    from dataclasses import replace as _replace
+
+    walk_t = np.array([0.0, 1.0, 2.0, 3.0])
+    walk_xy = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [1.0, 2.0]])
+    f = what_if.KnownFuture(id=1, center=np.array([0.55, 0.05, 0.9]), size=np.array([0.5, 0.5, 1.7]),
+                            velocity=np.array([1.0, 0.0, 0.0]), std_growth=0.0, stamp=0.5, walk_t=walk_t,
+                            walk_xy=walk_xy)
+    # the walk from 0.5 s on, moved by the centre's 5 cm offset from it, at the centre's height
+    np.testing.assert_allclose(f.predict(np.array([0.0, 1.0, 2.0, 9.0])),
+                               [[0.55, 0.05, 0.9], [1.05, 0.55, 0.9], [1.05, 1.55, 0.9], [1.05, 2.05, 0.9]])
+    g = f.advanced(1.0)
+    assert isinstance(g, what_if.KnownFuture) and g.stamp == 1.5
+    np.testing.assert_allclose(g.center, [1.05, 0.55, 0.9])
+    np.testing.assert_allclose(g.velocity[:2], [0.0, 1.0])  # walking along the walk's second leg
+    np.testing.assert_allclose(g.predict(np.array([0.5, 1.0])), f.predict(np.array([1.5, 2.0])))
+    np.testing.assert_array_equal(f.std_at(np.array([0.0, 2.0])), [0.0, 0.0])
+    # known for 0.25 s only: then on at the velocity it had then (the first leg's 1 m/s along x)
+    h = _replace(f, known_for=0.25)
+    np.testing.assert_allclose(h.predict(np.array([0.25, 1.25])), [[0.8, 0.05, 0.9], [1.8, 0.05, 0.9]], atol=1e-9)
+
+
+def test_future_known_reports_everyone_near_with_their_true_walk():
+    from dataclasses import replace as _replace
+
+    from context_factory import example_context
+    from sim import load_scenario
+    from sim.crowd_future import blind_walk
+
+    sc = load_scenario("corridor4", 3)
+    times, walk = blind_walk(sc, 3, 6.0)
+    p = make_perception("experiments.what_if:FutureKnown")
+    p.reset(_replace(example_context(), scenario="corridor4", seed=3, duration=sc.duration))
+    k = 240  # 2 s
+    first = len(sc.obstacles) + 1
+    people = tuple(ObstacleTruth(id=first + i, kind="person", label="person",
+                                 aabb_min=np.array([x - 0.25, y - 0.25, 0.0]), aabb_max=np.array([x + 0.25, y + 0.25, 1.7]),
+                                 velocity=np.zeros(3)) for i, (x, y) in enumerate(walk[k]))
+    T = np.eye(4)
+    T[:3, 3] = [float(walk[k, 0, 0]) - 1.0, float(walk[k, 0, 1]), 1.2]
+    out = p.update(_frame(stamp=times[k]), SimpleNamespace(T_world_camera=T, obstacles=people, stamp=times[k]))
+    assert out.obstacles  # everyone within 5 m, in any direction
+    for o in out.obstacles:
+        i = o.id - first
+        np.testing.assert_allclose(o.predict(np.array([1.5]))[0, :2], walk[k + 180, i], atol=1e-9)
