@@ -53,7 +53,7 @@ from sim.scenario import Scenario
 from sim.scene import build_scene
 from sim.vehicle import GRAVITY, load_vehicle
 
-__all__ = ["CLEARANCE_CAP", "CLEARANCE_LOG_LEN", "LIDAR_SEED_TAG", "World"]
+__all__ = ["CLEARANCE_CAP", "CLEARANCE_LOG_LEN", "LIDAR_SEED_TAG", "World", "episode_generators"]
 
 # The LiDAR's random streams come from SeedSequence([seed, LIDAR_SEED_TAG]), apart from the world's own
 # (SeedSequence(seed)): taking scans changes none of the numbers the rest of the world draws.
