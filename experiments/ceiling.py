@@ -5,7 +5,7 @@ For people who do not see the drone the whole walk is fixed by the seed (sim.cro
 that knows it needs no prediction and no caution; the earliest it can reach the goal is a search in
 space and time. On a grid over the floor at the flight altitude, the cells the drone can be in at step
 k are those within ``v_max * step`` of a cell it could be in at step k - 1, clear of structure by the
-drone's circumscribed radius, and farther than ``clearance`` from every person's centre at both steps.
+drone's circumscribed radius (plus ``static_margin``), and farther than ``clearance`` from every person's centre at both steps.
 The first step at which that set meets the goal region is the clairvoyant time to goal; a set that
 empties, or the time limit, means no drone of that speed could have made it.
 
@@ -40,12 +40,18 @@ class CeilingConfig:
     resolution: float = 0.05  # m per grid cell
     step: float = 0.05  # s per step (rounded to whole control periods)
     altitude_band: float = 0.1  # m: structure within this of the flight altitude counts
+    # m kept from structure beyond the drone's circumscribed radius (the shield keeps shield.static_margin,
+    # 0.1): a gap the drone fits through but its margins do not is a way only at 0
+    static_margin: float = 0.0
 
     def __post_init__(self):
         for name in ("clearance", "v_max", "resolution", "step", "altitude_band"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"CeilingConfig.{name}: must be a number > 0, got {v!r}")
+        m = self.static_margin
+        if not (isinstance(m, (int, float)) and math.isfinite(m) and m >= 0):
+            raise ValueError(f"CeilingConfig.static_margin: must be a number >= 0, got {m!r}")
         if self.v_max * self.step < self.resolution:
             raise ValueError(f"CeilingConfig: v_max * step ({self.v_max * self.step:g} m) is below the resolution "
                              f"({self.resolution:g} m): the drone could never leave its cell")
@@ -97,12 +103,14 @@ def clairvoyant_ceiling(scenario: Scenario, seed: int, cfg: CeilingConfig = Ceil
     nz = max(1, int(math.ceil(2 * cfg.altitude_band / res)))
     occupied = static_occupancy(sc, (0.0, -W / 2, z - cfg.altitude_band), (nx, ny, nz), res).any(axis=2)
     half = load_vehicle().collision_size[:2] / 2
-    radius = float(math.hypot(*half))
+    body = float(math.hypot(*half))
+    radius = body + cfg.static_margin
     xs = (np.arange(nx) + 0.5) * res
     ys = -W / 2 + (np.arange(ny) + 0.5) * res
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     clear = ndimage.distance_transform_edt(~occupied) * res > radius
-    clear &= (np.abs(Y) < W / 2 - radius) & (X > radius) & (X < L - radius)
+    # the end walls by the body alone: the drone starts and ends within the margin of them
+    clear &= (np.abs(Y) < W / 2 - radius) & (X > body) & (X < L - body)
     gx, gy = sc.drone.goal[0], sc.drone.goal[1]
     goal = (X - gx) ** 2 + (Y - gy) ** 2 < GOAL_TOLERANCE ** 2
     sx, sy = sc.drone.start[0], sc.drone.start[1]

@@ -49,6 +49,8 @@ def add_parser(sub) -> None:
                         "simulator's contacts begin at)")
     c.add_argument("--v-max", type=real(0.0, 20.0, lo_open=True), default=2.0,
                    help="the drone's top horizontal speed in m/s (default 2, the planners')")
+    c.add_argument("--static-margin", type=real(0.0, 2.0), default=0.0,
+                   help="metres kept from structure beyond the drone's radius (default 0; the shield keeps 0.1)")
     c.add_argument("--json", metavar="FILE", help="also write every seed's result to FILE")
 
 
@@ -75,7 +77,7 @@ def cmd_ceiling(args) -> int:
     if args.json:
         writable_file(args.json, "--json")
     try:
-        cfg = CeilingConfig(clearance=args.clearance, v_max=args.v_max)
+        cfg = CeilingConfig(clearance=args.clearance, v_max=args.v_max, static_margin=args.static_margin)
     except ValueError as e:
         raise UserError(str(e)) from None
     seeds = range(SPLITS[args.split], SPLITS[args.split] + args.seeds)
@@ -95,11 +97,12 @@ def cmd_ceiling(args) -> int:
         median = f"{statistics.median(times):.1f}" if times else "-"
         rows.append(f"{name:<18}{len(out):>6}   {100 * k / len(out):5.1f} [{100 * lo:5.1f}, {100 * hi:5.1f}]   {median:>8}")
     print(f"clairvoyant ceiling, {args.split} seeds {seeds.start}-{seeds.stop - 1}, clearance {cfg.clearance:g} m, "
-          f"v_max {cfg.v_max:g} m/s")
+          f"v_max {cfg.v_max:g} m/s, static margin {cfg.static_margin:g} m")
     print(f"{'scenario':<18}{'seeds':>6}   {'way through [95 %]':<22} {'median time [s]':>8}")
     print("\n".join(rows))
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"split": args.split, "clearance": cfg.clearance, "v_max": cfg.v_max, "scenarios": results},
+            json.dump({"split": args.split, "clearance": cfg.clearance, "v_max": cfg.v_max,
+                       "static_margin": cfg.static_margin, "scenarios": results},
                       f, indent=1)
     return 0

@@ -92,6 +92,15 @@ def test_a_walker_ahead_delays_the_drone_and_one_that_stops_in_a_narrow_corridor
     assert near.reachable and far.reachable and far.time_to_goal >= near.time_to_goal
 
 
+def test_a_gap_the_drone_fits_but_its_margin_does_not_is_a_way_only_without_the_margin():
+    # a box leaves 1.0 m beside the wall: the drone's 0.87 m fits, 0.87 m plus 0.1 m on each side does not
+    sc = make_scenario('[[obstacles]]\nkind = "box"\ncenter = [5.0, -0.5]\nsize = [0.4, 3.0, 2.0]\n')
+    assert clairvoyant_ceiling(sc, 0).reachable
+    assert not clairvoyant_ceiling(sc, 0, CeilingConfig(static_margin=0.1)).reachable
+    with pytest.raises(ValueError, match="static_margin"):
+        CeilingConfig(static_margin=-0.1)
+
+
 def test_ceiling_command_prints_shares_and_writes_every_seed(tmp_path, capsys):
     f = tmp_path / "one.toml"
     f.write_text(BASE + _walker((8.0, 0.0), (2.0, 0.0), speed=1.0))
