@@ -236,7 +236,11 @@ class KnownFuture(ObstaclePrediction):
 
 
 class FutureKnown(OraclePerception):
-    """oracle-360 whose every report predicts the person's true walk (module docstring)."""
+    """oracle-360 whose every report predicts the person's true walk (module docstring). It draws the walk
+    again from the context's scenario name and seed, so it runs on shipped scenarios; a report away from
+    the walk drawn (another scenario of the same name) is an error."""
+
+    tolerance = 0.3  # m between a report's centre and the walk drawn, at the report's stamp
 
     known_for = math.inf  # s ahead of each report the walk is known (KnownFuture.known_for)
 
@@ -258,6 +262,14 @@ class FutureKnown(OraclePerception):
         if self._walk is None:
             raise ValueError("future-known perception: reset with the episode's context first")
         t, xy, first = self._walk
+        for o in out.obstacles:
+            i = o.id - first
+            here = (np.array([np.interp(out.stamp, t, xy[:, i, a]) for a in (0, 1)])
+                    if 0 <= i < xy.shape[1] else np.full(2, np.inf))
+            if not np.hypot(*(np.asarray(o.center, float)[:2] - here)) <= self.tolerance:
+                raise ValueError(f"future-known perception: person {o.id} at t = {out.stamp:g} s is not where the walk "
+                                 "drawn again from the scenario's name and seed puts them (is the scenario a shipped "
+                                 "one, unchanged?)")
         preds = tuple(KnownFuture(id=o.id, center=o.center, size=o.size, velocity=o.velocity, std_growth=0.0,
                                   stamp=out.stamp, walk_t=t, walk_xy=xy[:, o.id - first], known_for=self.known_for)
                       for o in out.obstacles)

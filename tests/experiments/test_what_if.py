@@ -184,3 +184,8 @@ def test_future_known_reports_everyone_near_with_their_true_walk():
     for o in out.obstacles:
         i = o.id - first
         np.testing.assert_allclose(o.predict(np.array([1.5]))[0, :2], walk[k + 180, i], atol=1e-9)
+    # another episode under the same name: its people are not where the walk drawn again puts them
+    moved = tuple(_replace(o, aabb_min=o.aabb_min + [0.5, 0.0, 0.0], aabb_max=o.aabb_max + [0.5, 0.0, 0.0])
+                  for o in people)
+    with pytest.raises(ValueError, match="not where the walk"):
+        p.update(_frame(stamp=times[k]), SimpleNamespace(T_world_camera=T, obstacles=moved, stamp=times[k]))
