@@ -81,9 +81,13 @@ def cmd_ceiling(args) -> int:
     except ValueError as e:
         raise UserError(str(e)) from None
     seeds = range(SPLITS[args.split], SPLITS[args.split] + args.seeds)
-    rows, results = [], {}
     for name in args.scenarios:
         load_scenario(name)  # a bad name or file is refused before any work
+    print(f"clairvoyant ceiling, {args.split} seeds {seeds.start}-{seeds.stop - 1}, clearance {cfg.clearance:g} m, "
+          f"v_max {cfg.v_max:g} m/s, static margin {cfg.static_margin:g} m")
+    print(f"{'scenario':<18}{'seeds':>6}   {'way through [95 %]':<22} {'median time [s]':>8}", flush=True)
+    results = {}
+    for name in args.scenarios:  # each row as soon as its seeds are done
         out = []
         for s in seeds:
             try:
@@ -95,11 +99,8 @@ def cmd_ceiling(args) -> int:
         lo, hi = wilson(k, len(out))
         times = [r.time_to_goal for r in out if r.reachable]
         median = f"{statistics.median(times):.1f}" if times else "-"
-        rows.append(f"{name:<18}{len(out):>6}   {100 * k / len(out):5.1f} [{100 * lo:5.1f}, {100 * hi:5.1f}]   {median:>8}")
-    print(f"clairvoyant ceiling, {args.split} seeds {seeds.start}-{seeds.stop - 1}, clearance {cfg.clearance:g} m, "
-          f"v_max {cfg.v_max:g} m/s, static margin {cfg.static_margin:g} m")
-    print(f"{'scenario':<18}{'seeds':>6}   {'way through [95 %]':<22} {'median time [s]':>8}")
-    print("\n".join(rows))
+        print(f"{name:<18}{len(out):>6}   {100 * k / len(out):5.1f} [{100 * lo:5.1f}, {100 * hi:5.1f}]   {median:>8}",
+              flush=True)
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"split": args.split, "clearance": cfg.clearance, "v_max": cfg.v_max,
