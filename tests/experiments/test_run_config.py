@@ -231,3 +231,11 @@ def test_hostile_config_files_are_one_line_errors(tmp_path, capsys, make, fragme
 def _write(path, text):
     path.write_text(text)
     return path
+
+
+def test_the_people_give_way_example_turns_the_walkers_other_futures_off():
+    from pathlib import Path
+
+    f = Path(__file__).resolve().parents[2] / "examples" / "people_give_way.toml"
+    m = make_planner("default", 0.43, build(f, [])).planner.cfg.maneuvers
+    assert (m.p_keep, m.p_turn, m.p_stop, m.worst_case) == (1.0, 0.0, 0.0, 0.0)
