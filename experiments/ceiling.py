@@ -5,8 +5,8 @@ For people who do not see the drone the whole walk is fixed by the seed (sim.cro
 that knows it needs no prediction and no caution; the earliest it can reach the goal is a search in
 space and time. On a grid over the floor at the flight altitude, the cells the drone can be in at step
 k are those within ``v_max * step`` of a cell it could be in at step k - 1, clear of structure by the
-drone's circumscribed radius (plus ``static_margin``), and farther than ``clearance`` from every person's centre at both steps.
-The first step at which that set meets the goal region is the clairvoyant time to goal; a set that
+drone's circumscribed radius (plus ``static_margin``), and farther than ``clearance`` from every
+person's centre at both steps. The first step at which that set meets the goal region is the clairvoyant time to goal; a set that
 empties, or the time limit, means no drone of that speed could have made it.
 
 This is an upper bound on what a planner can do, not a planner: the speed is bounded, the acceleration
@@ -25,13 +25,11 @@ from typing import Callable
 import numpy as np
 from scipy import ndimage
 
+from experiments.episode import GOAL_TOLERANCE
 from sim.crowd_future import blind_walk
 from sim.scenario import Scenario
 from sim.static_grid import static_occupancy
 from sim.vehicle import load_vehicle
-
-GOAL_TOLERANCE = 0.4  # m: as the closed loop's (experiments.episode.GOAL_TOLERANCE)
-
 
 @dataclass(frozen=True)
 class CeilingConfig:

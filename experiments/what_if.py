@@ -199,6 +199,11 @@ class Combined(RecentlyLeft):
         return in_view or super()._adds(person, in_view, bearing, near_side, truth, frame)
 
 
+def _walk_at(t: np.ndarray, walk_t: np.ndarray, walk_xy: np.ndarray) -> np.ndarray:
+    """(K, 2) a walk's positions at absolute times t (K,), interpolated; held at its ends."""
+    return np.column_stack([np.interp(t, walk_t, walk_xy[:, 0]), np.interp(t, walk_t, walk_xy[:, 1])])
+
+
 @dataclass(frozen=True, eq=False)
 class KnownFuture(ObstaclePrediction):
     """A prediction that is the person's true walk: ``walk_t`` (K,) absolute times and ``walk_xy`` (K, 2)
@@ -212,18 +217,13 @@ class KnownFuture(ObstaclePrediction):
 
     def _at(self, t: np.ndarray) -> np.ndarray:
         s = np.minimum(t, self.stamp + self.known_for)
-        xy = np.column_stack([np.interp(s, self.walk_t, self.walk_xy[:, 0]),
-                              np.interp(s, self.walk_t, self.walk_xy[:, 1])])
+        xy = _walk_at(s, self.walk_t, self.walk_xy)
         late = t > s
         if np.any(late):
             h = 0.05
-            v = (self._known(s[late]) - self._known(s[late] - h)) / h
+            v = (xy[late] - _walk_at(s[late] - h, self.walk_t, self.walk_xy)) / h
             xy[late] += v * (t[late] - s[late])[:, None]
         return xy
-
-    def _known(self, t: np.ndarray) -> np.ndarray:
-        return np.column_stack([np.interp(t, self.walk_t, self.walk_xy[:, 0]),
-                                np.interp(t, self.walk_t, self.walk_xy[:, 1])])
 
     def predict(self, times: np.ndarray) -> np.ndarray:
         t = self.stamp + np.asarray(times, dtype=float)
@@ -264,8 +264,7 @@ class FutureKnown(OraclePerception):
         t, xy, first = self._walk
         for o in out.obstacles:
             i = o.id - first
-            here = (np.array([np.interp(out.stamp, t, xy[:, i, a]) for a in (0, 1)])
-                    if 0 <= i < xy.shape[1] else np.full(2, np.inf))
+            here = _walk_at(np.array([out.stamp]), t, xy[:, i])[0] if 0 <= i < xy.shape[1] else np.full(2, np.inf)
             if not np.hypot(*(np.asarray(o.center, float)[:2] - here)) <= self.tolerance:
                 raise ValueError(f"future-known perception: person {o.id} at t = {out.stamp:g} s is not where the walk "
                                  "drawn again from the scenario's name and seed puts them (is the scenario a shipped "
