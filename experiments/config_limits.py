@@ -527,6 +527,7 @@ LIMITS: dict[str, Limit] = {
     "oracle.velocity_noise": _SPEED0,  # m/s per axis
     "oracle.noise_time": _real(0.0, 3600.0, lo_open=True),  # s, a correlation time (divides)
     "oracle.noise_seed": _whole(0, SEED_MAX),
+    "oracle.line_of_sight": BOOL,
 }
 
 

@@ -195,3 +195,45 @@ def test_the_oracle_sees_whom_some_sensor_of_the_rig_could_see():
         p = make_perception("oracle")
         p.reset(ctx)
         assert {o.id for o in p.update(FRAME, _truth(0.0, people)).obstacles} == seen
+
+
+def _with_box(truth, lo, hi):
+    box = ObstacleTruth(id=99, kind="static", label="box", aabb_min=np.array(lo, float), aabb_max=np.array(hi, float),
+                        velocity=np.zeros(3))
+    return SimpleNamespace(T_world_camera=truth.T_world_camera, obstacles=truth.obstacles + (box,), stamp=truth.stamp)
+
+
+def test_the_line_of_sight_oracle_does_not_see_through_a_column():
+    # a 0.8 m wide column 1.5 m ahead hides the person 3 m ahead, not the one beside it nor one behind the drone
+    truth = _with_box(_truth(0.0, [AHEAD, (3.0, 1.5), BEHIND]), [1.3, -0.4, 0.0], [1.7, 0.4, 3.0])
+    through = OraclePerception(OracleConfig(), all_around=True)
+    assert {o.id for o in through.update(FRAME, truth).obstacles} == {1, 2, 3}
+    sight = OraclePerception(OracleConfig(line_of_sight=True), all_around=True)
+    assert {o.id for o in sight.update(FRAME, truth).obstacles} == {2, 3}
+    # a low box (below the camera's 1.2 m and the person's body height it looks at) hides nobody
+    low = _with_box(_truth(0.0, [AHEAD]), [1.3, -0.4, 0.0], [1.7, 0.4, 0.8])
+    assert {o.id for o in OraclePerception(OracleConfig(line_of_sight=True)).update(FRAME, low).obstacles} == {1}
+    # half hidden: one side of the body in sight is enough
+    edge = _with_box(_truth(0.0, [AHEAD]), [1.3, -0.4, 0.0], [1.7, 0.05, 3.0])
+    assert {o.id for o in OraclePerception(OracleConfig(line_of_sight=True)).update(FRAME, edge).obstacles} == {1}
+
+
+def test_the_line_of_sight_oracle_remembers_a_person_who_went_behind_a_column_for_its_memory():
+    column = ([1.3, -0.4, 0.0], [1.7, 0.4, 3.0])
+    p = OraclePerception(OracleConfig(line_of_sight=True, memory=1.0), all_around=True)
+    assert [o.id for o in p.update(FRAME, _with_box(_truth(0.0, [(3.0, 1.5)]), *column)).obstacles] == [1]
+    hidden = lambda t: [o.id for o in p.update(FRAME, _with_box(_truth(t, [AHEAD]), *column)).obstacles]  # noqa: E731
+    assert hidden(0.9) == [1] and hidden(1.1) == []
+
+
+def test_segment_blocked_is_the_slab_test():
+    from experiments.perception_modes import segment_blocked
+    lo, hi = np.array([[1.0, -1.0, 0.0]]), np.array([[2.0, 1.0, 1.0]])
+    p0 = np.array([0.0, 0.0, 0.5])
+    assert segment_blocked(p0, np.array([3.0, 0.0, 0.5]), lo, hi)  # through it
+    assert not segment_blocked(p0, np.array([0.9, 0.0, 0.5]), lo, hi)  # ends before it
+    assert segment_blocked(p0, np.array([3.0, 0.0, 1.5]), lo, hi)  # rising through its top half
+    assert not segment_blocked(np.array([0.0, 0.0, 1.5]), np.array([3.0, 0.0, 1.5]), lo, hi)  # above it, flat in z
+    assert not segment_blocked(np.array([0.0, 2.0, 0.5]), np.array([3.0, 2.0, 0.5]), lo, hi)  # beside it, flat in y
+    assert segment_blocked(np.array([1.5, 0.0, 0.5]), np.array([5.0, 0.0, 0.5]), lo, hi)  # starts inside
+    assert not segment_blocked(p0, np.array([3.0, 0.0, 0.5]), np.zeros((0, 3)), np.zeros((0, 3)))
