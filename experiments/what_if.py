@@ -90,6 +90,15 @@ class _DODTWithTruth:
         self.dodt.reset(context)  # DODT's moving-track rule reads the context's static map
         self._last_in_view: dict[int, float] = {}
 
+    def observe_lidar(self, scan) -> None:
+        """The rig's LiDAR scans go to DODT as in the ``dodt`` mode (without this, DODT on a rig would see
+        the forward camera alone)."""
+        self.dodt.observe_lidar(scan)
+
+    def observe_cameras(self, frames) -> None:
+        """The rig's other cameras' frames, likewise."""
+        self.dodt.observe_cameras(frames)
+
     def update(self, frame, truth=None) -> PerceptionOutput:
         if truth is None:
             raise ValueError(f"{type(self).__name__} needs the simulator's ground truth")

@@ -189,3 +189,16 @@ def test_future_known_reports_everyone_near_with_their_true_walk():
                   for o in people)
     with pytest.raises(ValueError, match="not where the walk"):
         p.update(_frame(stamp=times[k]), SimpleNamespace(T_world_camera=T, obstacles=moved, stamp=times[k]))
+
+
+@pytest.mark.parametrize("cls", [what_if.TrueStates, what_if.RecentlyLeft, what_if.NoPhantoms, what_if.Combined])
+def test_what_if_modes_pass_a_rigs_scans_and_frames_to_dodt(cls):
+    """On a rig, DODT under a what-if gets the LiDAR's scans and the other cameras' frames, as the dodt
+    mode does (the closed loop hands them to a module that has observe_lidar / observe_cameras)."""
+    seen = []
+    p = cls()
+    p.dodt = SimpleNamespace(observe_lidar=lambda scan: seen.append(("lidar", scan)),
+                             observe_cameras=lambda frames: seen.append(("cameras", frames)))
+    p.observe_lidar("scan-1")
+    p.observe_cameras(("back",))
+    assert seen == [("lidar", "scan-1"), ("cameras", ("back",))]
