@@ -168,7 +168,8 @@ def test_run_records_the_effective_configuration(tmp_path):
                         "navigator.mpc.horizon": 20, "map.p_hit": 0.75, "oracle.max_range": 6,
                         "dodt.motion.min_speed": 0.6}
     assert c["oracle"] == {"max_range": 6.0, "half_view": None, "memory": 1.0, "confirm_time": 0.0,
-                           "accel_window": 0.1, "velocity_noise": 0.0, "noise_time": 0.5, "noise_seed": 0}
+                           "accel_window": 0.1, "velocity_noise": 0.0, "noise_time": 0.5, "noise_seed": 0,
+                           "line_of_sight": False}
     assert c["shield"]["a_brake"] == 3.0 and c["shield"]["drone_radius"] > 0 and "v_max" in c["shield"]
     assert c["navigator"]["mpc"]["horizon"] == 20 and "cruise_speed" in c["navigator"]
     assert c["map"]["p_hit"] == 0.75 and c["map"]["size"][0] > 15  # sized to the corridor, then overridden
