@@ -48,6 +48,7 @@ from dodt.protocol import PerceptionOutput
 from experiments.perception_modes import DODTPerception, OraclePerception, horizontal_view, oracle_view
 from planner.types import ObstaclePrediction
 from sim.crowd_future import blind_walk
+from sim.ground_truth import person_id
 from sim.scenario import load_scenario
 
 ADDED_ID = 100000
@@ -264,7 +265,7 @@ class FutureKnown(OraclePerception):
             return
         sc = load_scenario(context.scenario, context.seed)
         t, xy = blind_walk(sc, context.seed, context.duration + 5.0)
-        self._walk = (t, xy, len(sc.obstacles) + 1)  # people's ids follow the obstacles' (sim.scene)
+        self._walk = (t, xy, person_id(len(sc.obstacles), 0))
 
     def update(self, frame, truth=None) -> PerceptionOutput:
         out = super().update(frame, truth)

@@ -9,6 +9,12 @@ STRUCTURE_ID = 0  # floor, walls, ceiling in segmentation images
 NOTHING_ID = -1  # no surface (or the drone itself)
 
 
+def person_id(n_obstacles: int, i: int) -> int:
+    """The obstacle id of a scenario's person ``i`` (0-based): the static obstacles take 1..n_obstacles in
+    the file's order, the people the ids after them (sim.scene builds them so)."""
+    return n_obstacles + 1 + i
+
+
 @dataclass(frozen=True, eq=False)
 class ObstacleTruth:
     id: int  # >= 1, stable for the episode

@@ -19,7 +19,7 @@ from sim.camera import quiet_stdout
 with quiet_stdout():  # PyBullet prints its build time on import
     import pybullet as p
 
-from sim.ground_truth import STRUCTURE_ID, ObstacleTruth
+from sim.ground_truth import STRUCTURE_ID, ObstacleTruth, person_id
 from sim.people import HUMANOID_URDF, Walker, person_height, walk_paths
 from sim.scenario import Scenario
 from sim.scenario_parts import Obstacle
@@ -98,7 +98,7 @@ def build_scene(scenario: Scenario, client: int, query_client: int, rng_paths: n
         w = Walker(path, person_height(person, rng_looks))
         _build_person(w, person, client, query_client, rng_looks)
         walkers.append(w)
-        person_ids.append(len(sc.obstacles) + 1 + i)
+        person_ids.append(person_id(len(sc.obstacles), i))
     drone, proxy = _build_drone(sc, client, query_client)
     return Scene(client, query_client, static, walkers, person_ids, drone, proxy)
 
