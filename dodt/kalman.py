@@ -71,8 +71,9 @@ class KalmanFilter:
         self.P = F @ self.P @ F.T + self.Q_for(dt, q_scale)
 
     def update(self, z: np.ndarray, window: float = 1.0, weak_axis: np.ndarray | None = None,
-               weak_factor: float = 1.0) -> None:
-        """Update with z = [x, y, vx, vy, (ax, ay)], or only [x, y] when measuring position.
+               weak_factor: float = 1.0, position_only: bool = False) -> None:
+        """Update with z = [x, y, vx, vy, (ax, ay)], or only [x, y] when measuring position (the
+        configuration's ``measurement``, or ``position_only`` for this update).
 
         ``window`` in (0, 1]: the pseudo-measurements' span over the full averaging window. A
         finite difference over a fraction w of it is 1/w times noisier in velocity and 1/w^2 in
@@ -82,7 +83,7 @@ class KalmanFilter:
         ``weak_factor`` times larger (a detection whose extent along it is unsure).
         """
         z = np.asarray(z, float)
-        if self.cfg.measurement == "position":
+        if self.cfg.measurement == "position" or position_only:
             H = self.H[:2]
             R = self.R[:2, :2].copy()
             z = z[:2]

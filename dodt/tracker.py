@@ -48,8 +48,9 @@ class _Observation:
     seq: int
     stamp: float
     center: np.ndarray
-    velocity: np.ndarray | None  # pseudo-measured velocity at this observation (None: the first one)
+    velocity: np.ndarray | None  # pseudo-measured velocity at this observation (None: none measured)
     lifted: bool = False  # measured on a learned box alone (its points: depths lifted from the box)
+    sensor: str = ""  # the sensor of the detection ("": the first camera; dodt.detection.Detection.sensor)
 
 
 def _anchor(det: Detection, source: str) -> np.ndarray:
@@ -101,7 +102,7 @@ class Track:
         # The histories hold what their windows (spans of time, as frames at the current frame
         # period: dodt.windows) need.
         self.observations: deque[_Observation] = deque()  # for the pseudo-measurements
-        self.observations.append(_Observation(seq, stamp, anchor.copy(), None, det.source == "learned"))
+        self.observations.append(_Observation(seq, stamp, anchor.copy(), None, det.source == "learned", det.sensor))
         self.clouds: deque[tuple[int, float, np.ndarray]] = deque()  # (seq, stamp, points) to vote with
         self.clouds.append((seq, stamp, det.points))
         # [t, x, y, z] centres over track.output_history: rows _h0 .. _h1 - 1 of a buffer that
@@ -339,37 +340,48 @@ class Track:
         first = max(0, len(obs) - n_avg)  # up to averaging_time back
         # The difference is taken to an observation of the same kind where the window holds one: a
         # learned box's anchor (depths lifted from the box) sits apart from the same person's cluster
-        # of points, and a track switching between them would read that offset as motion
+        # of points, and a track switching between them would read that offset as motion. Likewise
+        # each sensor sees a body from its own place (the LiDAR from above, all round; a camera its near
+        # face, completed behind): a track handed from one sensor to another (a walker coming within
+        # the camera's depth range, or leaving its view) would read the offset between their boxes as
+        # motion (a head-on walker read as crossing at 1.2-1.8 m/s for 0.4 s), so a difference never
+        # spans two sensors; with none of this sensor in the window only the position is measured.
         lifted = det.source == "learned"
         if k.same_kind_differences:
-            first = next((i for i in range(first, len(obs)) if obs[i].lifted == lifted), first)
-        prev = obs[first]
-        dt = stamp - prev.stamp
+            same = [i for i in range(first, len(obs)) if obs[i].sensor == det.sensor]
+            first = next((i for i in same if obs[i].lifted == lifted), same[0] if same else None)
+        prev = None if first is None else obs[first]
+        dt = 0.0 if prev is None else stamp - prev.stamp
         anchor, cut = self._measure(det)
         per_frame = self.clock.steps(self.clock.period)  # reference frames per frame
         if not cut:
             w_off = blend(0.3, per_frame)
             self.offset = (1 - w_off) * self.offset + w_off * (det.center[:2] - anchor)
+        v = None
         if dt > 1e-6:
             v = (anchor - prev.center[:2]) / dt
             v = self._turn_compensated(v, stamp, dt)
-        else:
-            v = self.kf.velocity.copy()
-        # Acceleration needs a velocity measured back then; until there is one, measure none
-        # (the filter's own estimate, so the update adds no innovation there).
-        a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
-        window = (len(obs) - first) / n_avg  # observations spanned / full window
         # a cut detection's range is unsure: its visible part's depth changes with how much is in view
         ray = None if not cut else np.array([-det.sides.axis[1], det.sides.axis[0]])
-        self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window, weak_axis=ray,
-                       weak_factor=CUT_RANGE_NOISE)
+        if v is None and prev is None:
+            self.kf.update(anchor, position_only=True, weak_axis=ray, weak_factor=CUT_RANGE_NOISE)
+        else:
+            if v is None:
+                v = self.kf.velocity.copy()
+            # Acceleration needs a velocity measured back then; until there is one, measure none
+            # (the filter's own estimate, so the update adds no innovation there).
+            a = (v - prev.velocity) / dt if prev.velocity is not None and dt > 1e-6 else self.kf.acceleration.copy()
+            window = (len(obs) - first) / n_avg  # observations spanned / full window
+            self.kf.update(np.array([anchor[0], anchor[1], v[0], v[1], a[0], a[1]]), window=window, weak_axis=ray,
+                           weak_factor=CUT_RANGE_NOISE)
         self.filter_speed = self.kf.limit_speed(self.cfg.track.max_speed)
         self.seen_xy = self.kf.position.copy()
         self.unseen_time = 0.0
         self.before_predict = None  # measured since: no prediction to hold back
         self.last_center = det.center[:2].astype(float)
         self.last_extent = float(max(det.size[0], det.size[1]))
-        self.observations.append(_Observation(seq, stamp, anchor.copy(), v, lifted))
+        self.observations.append(_Observation(seq, stamp, anchor.copy(), None if prev is None else v, lifted,
+                                              det.sensor))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
         # which then cannot follow a person whose box changes as they turn or swing their arms).

@@ -592,6 +592,36 @@ def test_velocity_is_differenced_between_detections_of_one_kind(same_kind):
         assert np.mean(errs) > 0.15
 
 
+def test_a_track_handed_from_one_sensor_to_another_reads_no_motion_from_their_offset():
+    """A walker coming head-on at 1.5 m/s, boxed by the LiDAR (10 Hz) 0.3 m to its left of where the
+    camera (30 Hz) boxes it once it comes into the camera's depth range: no velocity difference spans
+    the two sensors, so the hand-over adds no sideways motion (differenced across them, the offset read
+    as 1.2-1.8 m/s across for 0.4 s, a head-on walker taken for one crossing away from the drone)."""
+    tracker, rng, lateral, ahead = Tracker(DODTConfig()), np.random.default_rng(1), [], []
+    for k in range(40):
+        t = k / FPS
+        true = np.array([6.0 - 1.5 * t, 0.0, 0.9])
+        by_lidar = k < 15
+        if by_lidar and k % 3:
+            dets = []  # the LiDAR boxes one frame in three
+        else:
+            c = true + (np.array([0.0, 0.3, 0.0]) if by_lidar else 0.0)
+            pts = c + rng.normal(0.0, 0.05, (60, 3)) * [0.25, 0.25, 0.9]
+            d = Detection(center=c, size=SIZE.copy(), source="lidar" if by_lidar else "ensemble", points=pts)
+            d.sensor = "lidar" if by_lidar else ""
+            dets = [d]
+        if k:
+            tracker.predict(1 / FPS)
+        tracker.correct(dets, tracker.associate(dets, CAMERA), k, t, CAMERA)
+        assert len(tracker.tracks) == 1
+        if k >= 15:
+            v = tracker.tracks[0].kf.velocity
+            lateral.append(abs(float(v[1])))
+            ahead.append(float(v[0]))
+    assert max(lateral) < 0.3, lateral
+    assert abs(ahead[-1] + 1.5) < 0.2  # and it keeps the walk toward the camera
+
+
 def test_a_static_track_reports_the_velocity_its_filter_holds():
     """A track that identification has not called dynamic (here: never identified) reports the
     velocity and acceleration its filter holds, which move its prediction: no velocity hides
