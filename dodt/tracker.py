@@ -363,7 +363,7 @@ class Track:
             v = self._turn_compensated(v, stamp, dt)
         # a cut detection's range is unsure: its visible part's depth changes with how much is in view
         ray = None if not cut else np.array([-det.sides.axis[1], det.sides.axis[0]])
-        if v is None and prev is None:
+        if prev is None:  # nothing from this sensor to difference against
             self.kf.update(anchor, position_only=True, weak_axis=ray, weak_factor=CUT_RANGE_NOISE)
         else:
             if v is None:
