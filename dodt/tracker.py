@@ -351,22 +351,21 @@ class Track:
             same = [i for i in range(first, len(obs)) if obs[i].sensor == det.sensor]
             first = next((i for i in same if obs[i].lifted == lifted), same[0] if same else None)
         prev = None if first is None else obs[first]
-        dt = 0.0 if prev is None else stamp - prev.stamp
         anchor, cut = self._measure(det)
         per_frame = self.clock.steps(self.clock.period)  # reference frames per frame
         if not cut:
             w_off = blend(0.3, per_frame)
             self.offset = (1 - w_off) * self.offset + w_off * (det.center[:2] - anchor)
-        v = None
-        if dt > 1e-6:
-            v = (anchor - prev.center[:2]) / dt
-            v = self._turn_compensated(v, stamp, dt)
         # a cut detection's range is unsure: its visible part's depth changes with how much is in view
         ray = None if not cut else np.array([-det.sides.axis[1], det.sides.axis[0]])
+        v = None
         if prev is None:  # nothing from this sensor to difference against
             self.kf.update(anchor, position_only=True, weak_axis=ray, weak_factor=CUT_RANGE_NOISE)
         else:
-            if v is None:
+            dt = stamp - prev.stamp
+            if dt > 1e-6:
+                v = self._turn_compensated((anchor - prev.center[:2]) / dt, stamp, dt)
+            else:
                 v = self.kf.velocity.copy()
             # Acceleration needs a velocity measured back then; until there is one, measure none
             # (the filter's own estimate, so the update adds no innovation there).
@@ -380,8 +379,7 @@ class Track:
         self.before_predict = None  # measured since: no prediction to hold back
         self.last_center = det.center[:2].astype(float)
         self.last_extent = float(max(det.size[0], det.size[1]))
-        self.observations.append(_Observation(seq, stamp, anchor.copy(), None if prev is None else v, lifted,
-                                              det.sensor))
+        self.observations.append(_Observation(seq, stamp, anchor.copy(), v, lifted, det.sensor))
         self.z = float(det.center[2])
         # Output size: smoothed over frames (the reference code freezes a stable size instead,
         # which then cannot follow a person whose box changes as they turn or swing their arms).
