@@ -148,7 +148,9 @@ class KalmanConfig:
     # (dodt.tracker.Track._turn_compensated: the two halves of the window must turn the same way, so
     # that a corner already turned or the body's sway gives none); 0 turns it off (the paper)
     # ours: velocity pseudo-measurements difference a learned box's anchor against the oldest learned
-    # one in the window, and a cluster's against a cluster's, where the window holds one
+    # one in the window, and a cluster's against a cluster's, where the window holds one; and never
+    # across sensors (with nothing from the detection's sensor in the window, the position alone is
+    # measured). False: against the oldest observation in the window, whatever its kind or sensor
     same_kind_differences: bool = True
     turn_window: float = 1.0  # s
     turn_min_speed: float = 0.3  # m/s; slower, the heading says little
