@@ -28,7 +28,7 @@ from dodt.geometry import half_view
 class VehicleLimits:
     """The vehicle's size and physical limits."""
 
-    radius: float  # m: the circumscribed radius of its collision box (what the shield keeps clear)
+    radius: float  # m: the horizontal circumscribed radius of its collision box (what planners keep clear)
     collision_size: np.ndarray  # (3,) m: its collision box, body frame FLU
     mass: float  # kg
     thrust_to_weight: float  # the rotors' total thrust at full speed over the weight
@@ -41,11 +41,6 @@ class VehicleLimits:
         horizontal = gravity * math.sqrt(max(thrust_to_weight ** 2 - 1.0, 0.0))
         return VehicleLimits(radius=float(radius), collision_size=np.asarray(collision_size, float).copy(),
                              mass=float(mass), thrust_to_weight=float(thrust_to_weight), max_tilt_accel=horizontal)
-
-    @property
-    def half_width(self) -> float:
-        """m: half the collision box's longer horizontal side (how far the body reaches beside its centre)."""
-        return float(max(self.collision_size[0], self.collision_size[1]) / 2)
 
 
 @dataclass(frozen=True, eq=False)

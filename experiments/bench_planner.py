@@ -80,8 +80,7 @@ def record(scenario: str, seed: int, perception: str = "dodt", planner: str = DE
            **episode) -> tuple[list[_Snapshot], EpisodeContext]:
     """The planner inputs and plans of one closed-loop episode with a built-in planner (``episode``:
     experiments.episode_config.EpisodeConfig fields), and the episode's context."""
-    v = load_vehicle()
-    rec = _Recorder(make_planner(planner, v.radius, plan_radius=v.half_width))
+    rec = _Recorder(make_planner(planner, load_vehicle().radius))
     run_episode(scenario, seed=seed, perception=perception, planner=rec, cfg=EpisodeConfig(**episode))
     return rec.snapshots, replace(rec.context, static_map=None, seen=None)
 
@@ -91,7 +90,7 @@ def replay(snapshots: list[_Snapshot], context: EpisodeContext, repeats: int = 3
     and how many replayed plans (of all replays) equal the loop's."""
     spec, times, same = planner, [], 0
     for _ in range(repeats):
-        planner = make_planner(spec, context.vehicle.radius, plan_radius=context.vehicle.half_width)
+        planner = make_planner(spec, context.vehicle.radius)
         planner.reset(context)
         run, version, m = [], None, None
         for s in snapshots:

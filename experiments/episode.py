@@ -161,8 +161,7 @@ def _run(scenario, seed, perception, planner, out, cfg, renderer, on_frame, sett
         if others and render:
             world.add_cameras([m.yaw for m in others])
         if isinstance(spec, str):
-            planner = make_planner(spec, world.vehicle.radius, settings, shield=shield,
-                                   plan_radius=world.vehicle.half_width)
+            planner = make_planner(spec, world.vehicle.radius, settings, shield=shield)
             labels["planner"] = planner_label(spec, shield)
         else:
             labels["planner"] = type(planner).__name__

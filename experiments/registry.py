@@ -171,17 +171,12 @@ def planner_label(spec: str | None, shield: bool = False) -> str:
     return f"shield+{spec}" if shield else spec
 
 
-def make_planner(spec: str, robot_radius: float, settings: Settings = Settings(), shield: bool = False,
-                 plan_radius: float | None = None):
+def make_planner(spec: str, robot_radius: float, settings: Settings = Settings(), shield: bool = False):
     """The planner for an episode of a vehicle of horizontal radius ``robot_radius``: a built-in one (the
     maneuver and MPC planner behind the shield, ``navigator`` and ``shield`` sections applied; BUILTIN_PLANNERS)
-    or a plug-in (its ``planner`` section applied), behind the shield too when ``shield``. The shield checks
-    with ``robot_radius`` (the circumradius: the body in any direction); the built-in planner plans its
-    clearances with ``plan_radius`` (default ``robot_radius``; episodes pass the body's half width, which
-    the shield's stricter check backs: docs/planner.md)."""
+    or a plug-in (its ``planner`` section applied), behind the shield too when ``shield``."""
     if spec in BUILTIN_PLANNERS:
-        r_plan = robot_radius if plan_radius is None else plan_radius
-        nav = configured(settings, "navigator", NavigatorConfig(mpc=MPCConfig(robot_radius=r_plan)))
+        nav = configured(settings, "navigator", NavigatorConfig(mpc=MPCConfig(robot_radius=robot_radius)))
         return behind_shield(MPCPlanner(nav, solver=BUILTIN_PLANNERS[spec][0]), robot_radius, settings)
     plugin = load_plugin(spec, PLANNER_METHODS, "planner", "planner.types.Planner",
                          _plugin_config(spec, "planner", settings))

@@ -52,12 +52,6 @@ class VehicleParams:
         """Radius of the sphere around the body centre that contains the collision box."""
         return float(np.linalg.norm(self.collision_size) / 2)
 
-    @property
-    def half_width(self) -> float:
-        """Half the collision box's longer horizontal side: how far the body reaches beside its centre
-        (its corners reach ``radius``)."""
-        return float(max(self.collision_size[0], self.collision_size[1]) / 2)
-
 
 @lru_cache(maxsize=None)
 def load_vehicle(urdf: str | Path = QUADROTOR_URDF) -> VehicleParams:

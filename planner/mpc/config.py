@@ -23,7 +23,7 @@ class MPCConfig:
     w_slack_quad: float = 5e3  # per metre^2; ours (Intent-MPC 100/1000 on unscaled slack); larger: more ADMM iterations
     static_slack_scale: float = 10.0  # static slack costs this many times the dynamic one: squeezed between a
     # person and a wall, the plan eats into the person's margin (which holds its uncertainty), not the wall's; ours
-    robot_radius: float = 0.3  # m; episodes set the vehicle's half width (experiments.registry.make_planner)
+    robot_radius: float = 0.3  # m; our drone's collision box is ~0.55 x 0.55 m in x, y
     dynamic_margin: float = 0.3  # m; ours (Intent-MPC dynamic_safety 0.6 includes the robot)
     static_margin: float = 0.2  # m; ours
     z_std: float = 1.0  # std multiples added to the x, y semi-axes (Intent-MPC z-score 0.674)

@@ -33,10 +33,6 @@ def test_sections_apply_to_their_configurations():
     assert p.cfg.a_brake == 3.0 and isinstance(p.cfg.a_brake, float) and p.cfg.drone_radius == 0.43
     assert p.planner.cfg.mpc.horizon == 30 and p.planner.cfg.cruise_speed == 1.2 and p.planner.cfg.mpc.robot_radius == 0.43
     assert configured(s, "map", MapConfig()).p_hit == 0.75 and configured(s, "episode", EpisodeConfig()).plan_rate == 5.0
-    q = make_planner("default", 0.43, s, plan_radius=0.35)  # the shield keeps the circumradius, the plans the half width
-    assert q.cfg.drone_radius == 0.43 and q.planner.cfg.mpc.robot_radius == 0.35
-    assert make_planner("default", 0.43, build(None, ["navigator.mpc.robot_radius=0.3"]),
-                        plan_radius=0.35).planner.cfg.mpc.robot_radius == 0.3  # a setting still wins
     d = make_perception("dodt-no-fat", settings=s).dodt.cfg
     assert d.kalman.q_pos == 0.02 and d.ensemble.detectors == ("udepth",) and d.association.method == "center"
     assert make_perception("dodt").dodt.cfg.kalman.q_pos != 0.02  # nothing leaks into the presets

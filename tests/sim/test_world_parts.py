@@ -67,15 +67,3 @@ def test_keyframe_camera_path_interpolates_position_velocity_and_unwrapped_yaw()
     assert yaw == pytest.approx(3.0 + (2 * math.pi - 6.0) / 2)  # the short way round, through pi
     assert np.array_equal(path(5.0)[1], np.zeros(3))
     assert make_camera_path(SimpleNamespace(camera_path=None), [], None) is None
-
-
-def test_vehicle_half_width_and_radius():
-    from dodt.context import VehicleLimits
-    from sim.vehicle import load_vehicle
-
-    v = load_vehicle()
-    sx, sy, sz = v.collision_size
-    assert v.half_width == max(sx, sy) / 2 < v.radius  # beside the body less far than at its corners
-    assert abs(v.radius - float(np.linalg.norm([sx, sy, sz])) / 2) < 1e-12
-    lim = VehicleLimits.from_thrust(v.radius, v.collision_size, v.mass, v.thrust_to_weight)
-    assert lim.half_width == v.half_width
