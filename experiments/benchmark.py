@@ -50,12 +50,29 @@ class Cell:
         return f"{self.family}/{self.people}/{re.sub(r'[^A-Za-z0-9_.+-]', '_', self.perception)}"
 
 
-def split_seeds(split: str, count: int) -> list[int]:
+def split_seeds(split: str, count: int | str) -> list[int]:
+    """The seeds of a split: ``count`` the first N (an int or its text), or ``"start:stop"`` seeds start to
+    stop - 1, which must lie in the split (fresh seeds of ``dev`` that no earlier choice has seen)."""
     if split not in SPLITS:
         raise SweepError(f"--split: {split!r} is not one of {', '.join(SPLITS)}")
-    if not 1 <= count <= SPLIT_SIZE:
-        raise SweepError(f"--seeds: must be between 1 and {SPLIT_SIZE}, got {count}")
-    return list(range(SPLITS[split], SPLITS[split] + count))
+    first, last = SPLITS[split], SPLITS[split] + SPLIT_SIZE - 1
+    text = str(count).strip()
+    if ":" in text:
+        try:
+            lo, hi = (int(v) for v in text.split(":", 1))
+        except ValueError:
+            raise SweepError(f"--seeds: {text!r} is not N or start:stop (whole numbers)") from None
+        if not first <= lo < hi <= last + 1:
+            raise SweepError(f"--seeds: {text!r} must be a non-empty range within the {split} split's seeds "
+                             f"{first}-{last} (stop excluded)")
+        return list(range(lo, hi))
+    try:
+        n = int(text)
+    except ValueError:
+        raise SweepError(f"--seeds: {text!r} is not N or start:stop (whole numbers)") from None
+    if not 1 <= n <= SPLIT_SIZE:
+        raise SweepError(f"--seeds: must be between 1 and {SPLIT_SIZE}, got {n}")
+    return list(range(first, first + n))
 
 
 def _scenario(family: str, people: str):
@@ -63,10 +80,11 @@ def _scenario(family: str, people: str):
     return sc.with_values({"crowd.sees_drone": PEOPLE[people]}) if sc.people else sc
 
 
-def run_benchmark(out: Path, split: str, count: int, families=FAMILIES, modes=MODES, people=tuple(PEOPLE),
+def run_benchmark(out: Path, split: str, count: int | str, families=FAMILIES, modes=MODES, people=tuple(PEOPLE),
                   jobs: int = 1, dask_address: str | None = None, cfg=None, progress: bool = True,
                   settings=None, planner: str | None = None, shield: bool = False) -> dict:
-    """Run what is missing of the benchmark into ``out``; write and return the report. settings: configuration
+    """Run what is missing of the benchmark into ``out``; write and return the report. count: the split's
+    seeds (split_seeds: N, or "start:stop"). settings: configuration
     overrides (experiments.config); planner: a ``module:Class`` spec, None for the default planner; shield:
     the plug-in planner behind the passive-safety shield."""
     settings = settings or Settings()

@@ -2,6 +2,7 @@
 split), `compare` (two sweeps seed by seed) and `reproduce` (the paper's tables and the corridor sweeps)."""
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -10,7 +11,7 @@ from sim.scenario import ScenarioError, load_scenario
 from experiments.commands.common import (PERCEPTION_HELP, LazyText, UserError, add_command,
                                          add_config_options, add_episode_options, builtin_names, check_perception,
                                          check_planner, default_jobs, episode_config, examples, fraction, jobs,
-                                         nonempty_path, output_folder, real, settings, whole, writable_file)
+                                         nonempty_path, output_folder, real, settings, writable_file)
 
 SWEEP_EXAMPLES = examples(
     "dodt-nav sweep corridor --seeds 0:100 --out runs/sweep",
@@ -60,7 +61,9 @@ def add_parser(sub) -> None:
     bm.add_argument("what", choices=("nav",), help="nav: the closed-loop navigation benchmark")
     bm.add_argument("--split", choices=("dev", "test"), default="dev",
                     help="dev: seeds 0-999, for tuning and choosing; test: seeds 1000-1999, for reported figures")
-    bm.add_argument("--seeds", type=whole(1, 1000), default=100, help="seeds per cell, the first of the split (default 100)")
+    bm.add_argument("--seeds", type=seed_span, default="100",
+                    help="N: the split's first N seeds (default 100); start:stop: seeds start to stop-1, inside the "
+                         "split (fresh dev seeds for a choice, e.g. 200:360)")
     bm.add_argument("--families", default=None, help="comma list (default: all shipped families)")
     bm.add_argument("--perception", default=None, help="comma list of modes or module:Class plug-ins "
                                                         "(default: dodt,oracle,static-only)")
@@ -110,6 +113,15 @@ def add_parser(sub) -> None:
                      help="your own perception class, flown in one more navigation sweep beside dodt, oracle "
                           "and static-only (as many seeds as dodt); repeatable")
     add_config_options(rep)
+
+
+def seed_span(text: str) -> str:
+    """--seeds of `benchmark nav`: N or start:stop (whole numbers); whether they lie in the split is the
+    benchmark's check (experiments.benchmark.split_seeds)."""
+    parts = text.strip().split(":")
+    if len(parts) > 2 or not all(p.strip().isdigit() for p in parts):
+        raise argparse.ArgumentTypeError(f"must be N or start:stop (whole numbers), got {text!r}")
+    return text.strip()
 
 
 def _add_run_options(parser) -> None:
@@ -207,7 +219,11 @@ def cmd_benchmark(args) -> int:
     if args.quick:  # a smoke-sized run: two families, the oracle on the known map (unless given), two seeds
         families = families if args.families else ("corridor", "head_on")
         modes = modes if args.perception else ("oracle",)
-        count = min(count, 2)
+        try:
+            seeds = benchmark.split_seeds(args.split, count)
+        except SweepError as e:
+            raise UserError(str(e)) from None
+        count = f"{seeds[0]}:{seeds[0] + min(len(seeds), 2)}"
         if args.map is None and "static_map" not in dict(config.section("episode")):
             given["static_map"] = "truth"
     cfg = episode_config(args, config, **given)
