@@ -75,8 +75,14 @@ def _cli(*args, cwd=None):
 
 
 def _outcomes(results: dict) -> dict:
-    """Seed -> summary without the wall-clock figures."""
-    return {seed: {k: v for k, v in s.items() if k != "timing"} for seed, s in results.items()}
+    """Seed -> summary without the wall-clock figures and without where the camera rendered (a second
+    process in a sequential sweep, the episode's own in a pool: the same frames either way)."""
+    out = {}
+    for seed, s in results.items():
+        s = {k: v for k, v in s.items() if k != "timing"}
+        episode = {k: v for k, v in s["config"]["episode"].items() if k != "render_process"}
+        out[seed] = {**s, "config": {**s["config"], "episode": episode}}
+    return out
 
 
 def _lines(path):
