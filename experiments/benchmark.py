@@ -57,19 +57,17 @@ def split_seeds(split: str, count: int | str) -> list[int]:
         raise SweepError(f"--split: {split!r} is not one of {', '.join(SPLITS)}")
     first, last = SPLITS[split], SPLITS[split] + SPLIT_SIZE - 1
     text = str(count).strip()
-    if ":" in text:
-        try:
-            lo, hi = (int(v) for v in text.split(":", 1))
-        except ValueError:
-            raise SweepError(f"--seeds: {text!r} is not N or start:stop (whole numbers)") from None
+    try:
+        numbers = [int(v) for v in text.split(":", 1)]
+    except ValueError:
+        raise SweepError(f"--seeds: {text!r} is not N or start:stop (whole numbers)") from None
+    if len(numbers) == 2:
+        lo, hi = numbers
         if not first <= lo < hi <= last + 1:
             raise SweepError(f"--seeds: {text!r} must be a non-empty range within the {split} split's seeds "
                              f"{first}-{last} (stop excluded)")
         return list(range(lo, hi))
-    try:
-        n = int(text)
-    except ValueError:
-        raise SweepError(f"--seeds: {text!r} is not N or start:stop (whole numbers)") from None
+    n = numbers[0]
     if not 1 <= n <= SPLIT_SIZE:
         raise SweepError(f"--seeds: must be between 1 and {SPLIT_SIZE}, got {n}")
     return list(range(first, first + n))
