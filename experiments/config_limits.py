@@ -256,6 +256,9 @@ LIMITS: dict[str, Limit] = {
     "navigator.fov_margin": _real(0.0, math.pi),  # rad
     "navigator.watch_range": _RANGE,
     "navigator.watch_times": _real(0.0, 10.0, length=(1, 16)),  # s ahead
+    "navigator.stall_window": _real(0.0, 60.0, lo_open=True),  # s
+    "navigator.stall_progress": _RANGE,
+    "navigator.stall_radius": _real(0.0, 5.0, lo_open=True, optional=True),  # m; none: never
     # ---- navigator.nmpc (planner.mpc.config.NMPCConfig)
     "navigator.nmpc.stride": _whole(1, 100),  # MPC steps per NMPC step (at most the horizon: checked on build)
     "navigator.nmpc.max_iter": _whole(1, 10000),

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -64,6 +64,14 @@ class NavigatorConfig:
     # planned position to the obstacle's predicted one, weighted by that distance): what the drone is leaving
     # behind stops pulling the camera round, away from what lies ahead
     watch_times: tuple[float, ...] = (0.5, 1.0)
+    # held up: when the cost-to-go at the drone fell by less than stall_progress metres over the last
+    # stall_window seconds, the maneuvers and the MPC plan with stall_radius (at most mpc.robot_radius) instead
+    # of mpc.robot_radius until it makes progress again (the shield keeps the vehicle's radius). 0.35 m: the
+    # larger half side of the simulated drone's collision box, whose circumradius is 0.437 (ours; measured
+    # in docs/experiments.md). None: never
+    stall_window: float = 2.0  # s
+    stall_progress: float = 1.0  # m
+    stall_radius: float | None = 0.35  # m
     mpc: MPCConfig = field(default_factory=MPCConfig)
     nmpc: NMPCConfig = field(default_factory=NMPCConfig)  # the CasADi NMPC's solver (the nmpc planner only)
 
@@ -91,6 +99,9 @@ class MPCPlanner:
         m = cfg.mpc
         self.selector = ManeuverSelector(cfg.maneuvers, horizon=m.horizon, dt=m.dt, a_max=m.a_max_xy,
                                          v_max=m.v_max_xy, robot_radius=m.robot_radius)
+        own = self.mpc.cfg  # the solver's own configuration (the NMPC's on its coarser grid)
+        held = own if cfg.stall_radius is None else replace(own, robot_radius=min(cfg.stall_radius, m.robot_radius))
+        self._mpc_cfgs = (own, held)
         self.reset()
 
     def reset(self, context: EpisodeContext | None = None) -> None:
@@ -110,6 +121,35 @@ class MPCPlanner:
         self._goal: np.ndarray | None = None
         self.path_searches = 0
         self.path_failures = 0
+        self._progress: list[tuple[float, float]] = []  # (stamp, cost-to-go at the drone) over stall_window
+        self._set_radius(False)
+
+    def _set_radius(self, stalled: bool) -> None:
+        """The maneuvers and the MPC plan with stall_radius when held up, else with mpc.robot_radius."""
+        held = stalled and self.cfg.stall_radius is not None
+        r = self.cfg.mpc.robot_radius
+        self.selector.r = min(self.cfg.stall_radius, r) if held else r
+        self.mpc.cfg = self._mpc_cfgs[held]
+
+    def _update_stall(self, inp: PlannerInput, goal_field: np.ndarray) -> None:
+        """Record the cost-to-go at the drone and set the planning radius (config: stall_*)."""
+        c = self.cfg
+        if c.stall_radius is None:
+            return
+        occ = inp.occupancy
+        ij = occ.world_to_cell(np.asarray(inp.position, float)[None, :2])[0]
+        inside = 0 <= ij[0] < goal_field.shape[0] and 0 <= ij[1] < goal_field.shape[1]
+        g = float(goal_field[ij[0], ij[1]]) if inside else math.inf
+        if not math.isfinite(g):
+            g = float(np.hypot(*(np.asarray(inp.goal, float)[:2] - np.asarray(inp.position, float)[:2])))
+        h = self._progress
+        if h and inp.stamp < h[-1][0]:
+            h.clear()
+        h.append((float(inp.stamp), g))
+        while len(h) > 1 and inp.stamp - h[1][0] >= c.stall_window:
+            h.pop(0)
+        full = inp.stamp - h[0][0] >= c.stall_window - 1e-9
+        self._set_radius(full and h[0][1] - g < c.stall_progress)
 
     @property
     def path(self) -> np.ndarray | None:
@@ -223,6 +263,7 @@ class MPCPlanner:
         if np.hypot(*d) < 1e-6:
             d = np.array([1.0, 0.0])
         clear, goal = self._static_fields(inp)
+        self._update_stall(inp, goal)
         man = self.selector.choose(inp.stamp, inp.position, inp.velocity, d, inp.obstacles, clear, goal,
                                    inp.occupancy.xy_origin, inp.occupancy.res, inp.goal[:2])
         self.last_maneuver = man

@@ -147,3 +147,24 @@ def test_the_half_view_is_the_context_cameras_unless_configured():
     pinned = _planner(camera_half_fov=0.759)
     pinned.reset(example_context(intrinsics=wide))
     assert pinned.half_fov == 0.759
+
+
+def test_a_drone_held_up_plans_with_the_stall_radius_and_returns_to_its_own():
+    """No progress toward the goal over stall_window: the maneuvers and the MPC plan with stall_radius; once
+    the drone gains stall_progress over the window again, with the vehicle's radius; never wider than it."""
+    occ = _corridor_map()
+    pl = _planner()  # the defaults: 0.35 m after 2 s with less than 1 m of progress
+    radii = []
+    for k in range(31):  # held at x = 5 for 3 s
+        pl.plan(_input(0.1 * k, (5.0, 0.0), (0.0, 0.0), occupancy=occ))
+        radii.append((pl.selector.r, pl.mpc.cfg.robot_radius))
+    assert radii[19] == (R_ROBOT, R_ROBOT)  # under 2 s of record: not held up yet
+    assert radii[20] == radii[-1] == (0.35, 0.35)
+    for k in range(31, 52):  # then 1 m/s toward the goal: 2 m over the window
+        pl.plan(_input(0.1 * k, (5.0 + 0.1 * (k - 30), 0.0), (1.0, 0.0), occupancy=occ))
+    assert (pl.selector.r, pl.mpc.cfg.robot_radius) == (R_ROBOT, R_ROBOT)
+    for kw, r in (({"stall_radius": None}, R_ROBOT), ({"mpc": MPCConfig(robot_radius=0.3)}, 0.3)):
+        other = MPCPlanner(NavigatorConfig(**{"mpc": MPCConfig(robot_radius=R_ROBOT), **kw}))
+        for k in range(31):
+            other.plan(_input(0.1 * k, (5.0, 0.0), (0.0, 0.0), occupancy=occ))
+        assert other.selector.r == r and other.mpc.cfg.robot_radius == r
