@@ -99,8 +99,10 @@ class MPCPlanner:
         m = cfg.mpc
         self.selector = ManeuverSelector(cfg.maneuvers, horizon=m.horizon, dt=m.dt, a_max=m.a_max_xy,
                                          v_max=m.v_max_xy, robot_radius=m.robot_radius)
-        own = self.mpc.cfg  # the solver's own configuration (the NMPC's on its coarser grid)
-        held = own if cfg.stall_radius is None else replace(own, robot_radius=min(cfg.stall_radius, m.robot_radius))
+        # the solver's own configuration (the NMPC's on its coarser grid), and the same held up (stall_radius,
+        # never wider than its own radius; without stall_radius the same)
+        own = self.mpc.cfg
+        held = own if cfg.stall_radius is None else replace(own, robot_radius=min(cfg.stall_radius, own.robot_radius))
         self._mpc_cfgs = (own, held)
         self.reset()
 
@@ -125,11 +127,10 @@ class MPCPlanner:
         self._set_radius(False)
 
     def _set_radius(self, stalled: bool) -> None:
-        """The maneuvers and the MPC plan with stall_radius when held up, else with mpc.robot_radius."""
-        held = stalled and self.cfg.stall_radius is not None
-        r = self.cfg.mpc.robot_radius
-        self.selector.r = min(self.cfg.stall_radius, r) if held else r
-        self.mpc.cfg = self._mpc_cfgs[held]
+        """The maneuvers and the MPC plan with the held-up configuration's radius when stalled, else with
+        mpc.robot_radius (_mpc_cfgs)."""
+        self.mpc.cfg = self._mpc_cfgs[stalled]
+        self.selector.r = self.mpc.cfg.robot_radius
 
     def _update_stall(self, inp: PlannerInput, goal_field: np.ndarray) -> None:
         """Record the cost-to-go at the drone and set the planning radius (config: stall_*)."""
