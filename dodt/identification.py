@@ -164,13 +164,14 @@ def faced_then(points: np.ndarray, origin_now, origins_then, cos_min: float | No
 
 class LidarCloud(NamedTuple):
     """One LiDAR scan's filtered cloud as the vote reads it back: the frame stamp it was fused at, the
-    detector's filtered world points (dodt.lidar_detector), the scan's pose, and its lowest ray's
-    elevation [rad] in the sensor frame (None: not known)."""
+    detector's filtered world points (dodt.lidar_detector), the scan's pose, and its lowest and highest
+    rays' elevations [rad] in the sensor frame (None: not known)."""
 
     stamp: float
     points: np.ndarray
     T_world_sensor: np.ndarray
     elevation_min: float | None
+    elevation_max: float | None = None
 
     @property
     def origin(self) -> np.ndarray:
@@ -179,7 +180,8 @@ class LidarCloud(NamedTuple):
 
 def in_lidar_field(points: np.ndarray, scans, min_range: float, margin: float) -> np.ndarray:
     """(n,) bool: whether each point lay, by ``margin`` m, inside the field of at least one of ``scans``
-    (LidarCloud): above the scan's lowest ray and beyond ``min_range`` (the detector's blind zone). A static
+    (LidarCloud): above the scan's lowest ray, below its highest and beyond ``min_range`` (the detector's
+    blind zone). A static
     box the sensor passes close by is below its lowest ray (-7 deg: 0.2 m under the sensor at 1.6 m) until
     the sensor is past it; its top face then comes into the field at once, points that were in no cloud
     back then, and would vote moving. (The detector's horizontal range is left out: what it cuts comes in
@@ -194,6 +196,9 @@ def in_lidar_field(points: np.ndarray, scans, min_range: float, margin: float) -
         if s.elevation_min is not None:
             q = d @ T[:3, :3]  # the sensor frame
             ok &= q[:, 2] - np.hypot(q[:, 0], q[:, 1]) * np.tan(s.elevation_min) >= margin
+        if s.elevation_max is not None:  # a sensor under the body: what rises above its highest ray
+            q = d @ T[:3, :3]
+            ok &= np.hypot(q[:, 0], q[:, 1]) * np.tan(s.elevation_max) - q[:, 2] >= margin
         inside |= ok
     return inside
 

@@ -138,7 +138,7 @@ class DODT:
         self.lidar_clouds: deque[LidarCloud] = deque()
         # the rig's other cameras' poses and clouds by frame seq, to vote with: {sensor: (poses, clouds, K)}
         self.other_views: dict[str, tuple[dict, dict, object]] = {}
-        self._lidar_view = (None, None, None)  # (static map, geofence, lowest ray's elevation): set_scene
+        self._lidar_view = (None, None, None, None)  # (static map, geofence, lowest, highest ray's elevation): set_scene
         self.last_stamp: float | None = None
         self.poses: dict[int, np.ndarray] = {}
         self.clouds: dict[int, np.ndarray] = {}  # seq -> that frame's filtered cloud
@@ -183,13 +183,14 @@ class DODT:
         self.counters["restarted_after_gap"] += 1
         return True
 
-    def set_scene(self, static_map=None, geofence=None, lidar_elevation_min: float | None = None) -> None:
+    def set_scene(self, static_map=None, geofence=None, lidar_elevation_min: float | None = None,
+                  lidar_elevation_max: float | None = None) -> None:
         """What the LiDAR detector knows of the scene (dodt.lidar_detector): the static map
         (a dodt.context.StaticMapView), the geofence ((x, y) low, (x, y) high; its sides are walls),
-        the LiDAR's lowest ray's elevation [rad]. The motion label checks its tracks against the static
+        the LiDAR's lowest and highest rays' elevations [rad]. The motion label checks its tracks against the static
         map's long-held structure (``established_fraction``) and the geofence's walls (dodt.motion_label);
         the tracker holds coasting tracks off those walls (track.wall_clearance)."""
-        self._lidar_view = (static_map, geofence, lidar_elevation_min)
+        self._lidar_view = (static_map, geofence, lidar_elevation_min, lidar_elevation_max)
         self.motion.structure_test = getattr(static_map, "established_fraction", None)
         walls = None if geofence is None else (np.asarray(geofence[0], float), np.asarray(geofence[1], float))
         self.motion.geofence = self.tracker.walls = walls
@@ -242,13 +243,14 @@ class DODT:
         scan, self._scan = self._scan, None
         if scan is None or not np.all(np.isfinite(scan.T_world_sensor)):
             return [], None
-        static_map, geofence, el_min = self._lidar_view
+        static_map, geofence, el_min, el_max = self._lidar_view
         out = []
         grow = self.cfg.lidar.voxel
         found = self.lidar(scan, static_map, geofence, el_min)
         if self.lidar_clouds:
             self.tracker.lidar_clock.observe(stamp - self.lidar_clouds[-1].stamp)
-        self.lidar_clouds.append(LidarCloud(stamp, self.lidar.last_cloud, np.array(scan.T_world_sensor, float), el_min))
+        self.lidar_clouds.append(LidarCloud(stamp, self.lidar.last_cloud, np.array(scan.T_world_sensor, float), el_min,
+                                           el_max))
         # s: the voting's reach back and its scans (at 10 Hz), and a period to spare
         span = self.cfg.lidar.vote_span + 0.1 * (self.cfg.lidar.vote_scans + 1)
         while self.lidar_clouds and self.lidar_clouds[0].stamp < stamp - span:

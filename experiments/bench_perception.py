@@ -70,12 +70,13 @@ def rigged_world(sc, seed: int, rig_name: str, segmentation: bool):
 
 def rigged_dodt(config: str, sc, rig_name: str) -> DODT:
     """DODT of a configuration, told the scene as the closed loop's context tells it: the corridor as the
-    geofence, and the rig's LiDAR's lowest ray."""
+    geofence, and the rig's LiDAR's lowest and highest rays."""
     co = sc.corridor
     model = next((m.lidar_model() for m in lidars(rig(rig_name))), None)
     pipe = DODT(preset(config))
     pipe.set_scene(geofence=(np.array([0.0, -co.width / 2]), np.array([co.length, co.width / 2])),
-                   lidar_elevation_min=None if model is None else model.elevation_min)
+                   lidar_elevation_min=None if model is None else model.elevation_min,
+                   lidar_elevation_max=None if model is None else model.elevation_max)
     return pipe
 
 

@@ -136,7 +136,8 @@ class DODTPerception:
         lidar = next((s for s in context.sensors if isinstance(s, LidarSensor)), None) if context else None
         # the map lets DODT's motion label tell a static obstacle's edge from a person (dodt.motion_label)
         self.dodt.set_scene(smap, None if context is None else context.geofence,
-                            None if lidar is None else lidar.model.elevation_min)
+                            None if lidar is None else lidar.model.elevation_min,
+                            None if lidar is None else lidar.model.elevation_max)
 
     def observe_lidar(self, scan) -> None:
         self.dodt.observe_lidar(scan)

@@ -42,6 +42,20 @@ def test_under_the_lowest_ray_or_in_the_blind_zone_is_outside_the_field():
     assert in_lidar_field(pts[:1], scans + tilted, 0.35, 0.05)[0]
 
 
+def test_over_the_highest_ray_of_a_sensor_under_the_body_is_outside_the_field():
+    """Upside down under the body (-52 to +7 deg), the sensor misses what rises above its highest ray: a
+    box's top close by, which comes into the field as it moves away."""
+    below = [LidarCloud(0.0, np.empty((0, 3)), pose((0.0, 0.0, 1.08)), np.radians(-52.0), np.radians(7.0))]
+    pts = np.array([[1.0, 0.0, 1.6],   # the highest ray passes 1.20 m up at 1 m: 0.4 m over it
+                    [1.0, 0.0, 1.0],   # between the rays (the lowest passes 1.28 m under the sensor at 1 m)
+                    [4.0, 0.0, 1.5],   # the highest ray passes 1.57 m up at 4 m: 0.07 m under it
+                    [0.5, 0.0, 0.3]])  # the lowest ray passes 0.44 m up at 0.5 m: under it
+    assert in_lidar_field(pts, below, 0.35, 0.05).tolist() == [False, True, True, False]
+    assert not in_lidar_field(pts[2:3], below, 0.35, 0.1)[0]  # within the margin of the highest ray
+    # no highest ray known (a cloud of an older caller): what lies over it counts as in
+    assert in_lidar_field(pts[:1], [below[0]._replace(elevation_max=None)], 0.35, 0.05)[0]
+
+
 def visible_box_points(lo, hi, sensor, step=0.04):
     """The points of a box's faces that face the sensor and lie above its lowest ray, within 6 m."""
     lo, hi, sensor = (np.asarray(v, float) for v in (lo, hi, sensor))
