@@ -168,7 +168,7 @@ ANY_STRING = Limit(kind="string")
 # the code's own lists (module docstring)
 RENDERER_CHOICES = ("auto", "gl", "pybullet", "tiny", "egl")  # sim.scenario.RENDERER_CHOICES
 # the named sensor rigs (sim.rig.RIGS; not imported here: it loads the simulator)
-RIG_NAMES = ("front", "front_back", "surround4", "lidar")
+RIG_NAMES = ("front", "front_back", "surround4", "lidar", "lidar_below")
 PLANNER_NAMES = ("default", "nmpc")  # the built-in planners (experiments.registry.BUILTIN_PLANNERS), default first
 STATIC_MAPS = ("depth", "truth")  # the static maps an episode can fly with (EpisodeConfig.static_map)
 LEARNED_LAYOUTS = ("auto", "dodt", "yolov8", "yolov5", "yolox")  # "auto" + dodt.learned.yolo.LAYOUTS

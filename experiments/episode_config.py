@@ -36,8 +36,8 @@ class EpisodeConfig:
     # the camera's renderer (sim.camera: auto, gl, pybullet, tiny); None: the scenario's. Changes the images
     # (gl and pybullet draw the same geometry, shaded differently), so outcomes are compared per renderer
     renderer: str | None = None
-    # the drone's sensors (sim.rig): front (the paper's forward camera), front_back, surround4, lidar; None: the
-    # scenario's [[sensors]] if it declares them, else front
+    # the drone's sensors (sim.rig): front (the paper's forward camera), front_back, surround4, lidar,
+    # lidar_below; None: the scenario's [[sensors]] if it declares them, else front
     rig: str | None = None
 
     def __post_init__(self):

@@ -6,12 +6,13 @@ and the scan pattern these parameters shape).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 GOLDEN_FRACTION = (math.sqrt(5.0) - 1.0) / 2.0  # the golden ratio's fractional part, 0.618...
 TOP_MOUNT_HEIGHT = 0.12  # m above the body's centre: the -7 deg edge of the view then clears the drone's box
+BELOW_MOUNT_DEPTH = 0.12  # m below the body's centre, upside down: the +7 deg edge then clears the box's bottom
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,22 @@ class LidarModel:
         for ok, why in checks:
             if not ok:
                 raise ValueError(f"LidarModel {self.name!r}: {why}")
+
+
+def upside_down(model: LidarModel) -> LidarModel:
+    """The model of the same sensor mounted upside down, its field in the body's (upright) frame: the
+    elevations mirrored (a Mid-360's -7 to +52 deg becomes -52 to +7 deg); the scan pattern's shape is
+    symmetric, so nothing else changes."""
+    return replace(model, elevation_min=-model.elevation_max, elevation_max=-model.elevation_min)
+
+
+def below_mount(depth: float = BELOW_MOUNT_DEPTH) -> np.ndarray:
+    """(4, 4) T_body_sensor of a LiDAR hung under the body, ``depth`` m below its centre, x forward, its frame
+    kept upright (the field of an upside-down sensor is upside_down(model)'s). Its highest rays (+7 deg)
+    pass under the drone's box (its bottom lies 0.06 m below the centre) to the box's corners."""
+    T = np.eye(4)
+    T[2, 3] = -depth
+    return T
 
 
 def top_mount(height: float = TOP_MOUNT_HEIGHT) -> np.ndarray:

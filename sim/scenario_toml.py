@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from sim.lidar_model import LidarModel
-from sim.rig import SensorMount
+from sim.lidar_model import LidarModel, upside_down
+from sim.rig import LIDAR_MOUNTS, SensorMount
 from sim.scenario_bounds import (MAX_ANGLE_DEG, MAX_COORDINATE, MAX_DURATION, MAX_FILE_BYTES, MAX_KEY_PARTS,
                                  MAX_MOUNT_OFFSET, MAX_NAME_CHARS, MAX_OBSTACLE_SIZE, MAX_OBSTACLES, MAX_PEOPLE,
                                  MAX_POINTS, MAX_SENSORS, SEED_MAX, ScenarioError, finite_number, short_repr)
@@ -268,7 +268,8 @@ def _array_of_tables(top: _Section, name: str, most: int) -> list[_Section]:
 
 def _read_sensors(top: _Section) -> tuple[SensorMount, ...]:
     """[[sensors]]: the drone's rig (sim.rig), each a camera like [camera] turned by ``yaw_deg`` on the body,
-    or a LiDAR on top (its model's parameters; sim.lidar_model). The first is the [camera] itself: a camera
+    or a LiDAR (its model's parameters; sim.lidar_model) on top of the body or, with ``mount = "below"``,
+    upside down under it (its elevations in the body's frame, by default -52 to +7 deg). The first is the [camera] itself: a camera
     with ``yaw_deg`` 0. Empty when the file has none (then ``--rig``, front by default, decides)."""
     out = []
     for s in _array_of_tables(top, "sensors", MAX_SENSORS):
@@ -279,9 +280,10 @@ def _read_sensors(top: _Section) -> tuple[SensorMount, ...]:
         if not name or len(name) > MAX_NAME_CHARS or not name.isprintable() or name in {m.name for m in out}:
             s.fail(s.key("name"), f"expected a unique printable name, got {short_repr(name)}")
         yaw = s.number("yaw_deg", 0.0, lo=-180.0, hi=180.0)
-        lidar = None
+        lidar, mount = None, "top"
         if kind == "lidar":
-            d = LidarModel()
+            mount = s.string("mount", "top", choices=LIDAR_MOUNTS)
+            d = LidarModel() if mount == "top" else upside_down(LidarModel())
             el_min = s.number("elevation_min_deg", math.degrees(d.elevation_min), lo=-90.0, hi=90.0)
             el_max = s.number("elevation_max_deg", math.degrees(d.elevation_max), lo=-90.0, hi=90.0)
             if el_max <= el_min:
@@ -293,7 +295,7 @@ def _read_sensors(top: _Section) -> tuple[SensorMount, ...]:
                                max_range=s.number("max_range", d.max_range, lo=1.0, hi=200.0),
                                range_std=s.number("range_std", d.range_std, lo=0.0, hi=1.0))
         s.done()
-        out.append(SensorMount(kind, name, yaw, lidar))
+        out.append(SensorMount(kind, name, yaw, lidar, mount))
     if out and (out[0].kind != "camera" or out[0].yaw != 0.0):
         top.fail("sensors[0]", "the first sensor is the [camera] table's: kind = \"camera\" with yaw_deg = 0")
     return tuple(out)

@@ -84,7 +84,8 @@ def add_parser(sub) -> None:
     opt("--renderer", RENDERER_HELP, choices=RENDERER_CHOICES)
     opt("--people", "only the time per plan against these numbers of people in range (comma list, "
                     "e.g. 10,50,200)", type=_counts, metavar="N,...")
-    opt("--rig", "perception, runtime, loop: the drone's sensors (front, the default; front_back, surround4, lidar): "
+    opt("--rig", "perception, runtime, loop: the drone's sensors (front, the default; front_back, surround4, lidar, "
+                 "lidar_below): "
                  "every configuration reads them all (perception: recall counts the people all round, in view or "
                  "not; runtime: the other cameras' and the LiDAR's modules are timed too)",
         choices=RIG_NAMES)

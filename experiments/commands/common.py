@@ -214,7 +214,8 @@ def add_rig_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rig", choices=RIG_NAMES, default=None,
                         help="the drone's sensors: front (the paper's forward RGB-D camera, default), front_back, "
                              "surround4 (four cameras 90 deg apart), lidar (a Mid-360-like LiDAR on top and the "
-                             "forward camera)")
+                             "forward camera), lidar_below (that LiDAR upside down under the body and the forward "
+                             "camera)")
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:

@@ -245,3 +245,27 @@ def test_scanning_changes_nothing_else_the_world_does(method):
     scans = [x for x in scanned[0] if not isinstance(x, tuple)]
     scans_again = [x for x in scanned_again[0] if not isinstance(x, tuple)]
     assert len(scans) == 12 and all(np.array_equal(a, b) for a, b in zip(scans, scans_again))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_flying_at_head_height_a_lidar_under_the_body_sees_the_person_beside_it_one_on_top_does_not(method):
+    """The drone at 1.6 m, a 1.65 m person 0.8 m to its left: on top (1.72 m up, -7 deg at the lowest) the
+    field passes over their head; upside down under the body (1.48 m up, -52 to +7 deg) it holds them from
+    the floor up, and no ray meets the drone's own box."""
+    from sim.rig import rig
+    sc = make_scenario(standing(1.65, (5.0, 0.8))).with_values({"drone.start": [5.0, 0.0, 1.6]})
+    w = World(sc, seed=0, camera=False, render=False)
+    person = next(o for o in w.obstacle_truth() if o.kind == "person")
+    counts = {}
+    for name in ("lidar", "lidar_below"):
+        mount = next(m for m in rig(name) if m.kind == "lidar")
+        s = w.lidar_scan(mount.lidar_model(), mount.T_body_lidar(), method=method)
+        np.testing.assert_allclose(s.T_world_sensor, w.T_world_body() @ mount.T_body_lidar())
+        pts = s.points_world()
+        on = np.all((pts >= person.aabb_min - 0.05) & (pts <= person.aabb_max + 0.05), axis=1)
+        counts[name] = int(on.sum())
+        if name == "lidar_below":
+            assert np.linalg.norm(pts - s.T_world_sensor[:3, 3], axis=1).min() > 0.3  # nothing of the drone
+            assert pts[on, 2].min() < 0.3 and pts[:, 2].min() < 0.05  # the person's legs, and the floor
+    assert counts["lidar"] < 5 and counts["lidar_below"] > 100, counts
+    w.close()

@@ -100,6 +100,25 @@ def test_a_scenario_declares_its_rig_and_rig_of_prefers_the_command_line():
     assert rig_of(None, make_scenario()) == ("front", RIGS["front"])
 
 
+def test_a_lidar_under_the_body_hangs_upside_down():
+    """Under the body a Mid-360 hangs upside down: its field, in the body's frame, is -52 to +7 deg, unless
+    the file says otherwise; the named rig lidar_below carries it."""
+    sc = make_scenario('[[sensors]]\nkind = "camera"\n[[sensors]]\nkind = "lidar"\nmount = "below"\n'
+                       '[[sensors]]\nkind = "lidar"\nname = "low"\nmount = "below"\nelevation_max_deg = 2\n')
+    _, below, low = sc.sensors
+    for m in (below, lidars(rig("lidar_below"))[0]):
+        model = m.lidar_model()
+        assert m.mount == "below" and m.T_body_lidar()[2, 3] == pytest.approx(-0.12)
+        assert (np.degrees(model.elevation_min), np.degrees(model.elevation_max)) == pytest.approx((-52.0, 7.0))
+    assert np.degrees(low.lidar_model().elevation_max) == pytest.approx(2.0)
+    assert np.degrees(low.lidar_model().elevation_min) == pytest.approx(-52.0)
+    top = lidars(rig("lidar"))[0]
+    assert top.T_body_lidar()[2, 3] == pytest.approx(0.12) and np.degrees(top.lidar_model().elevation_min) == \
+        pytest.approx(-7.0)
+    with pytest.raises(ValueError, match="mount must be"):
+        SensorMount("lidar", "l", mount="under")
+
+
 @pytest.mark.parametrize("bad, message", [
     ('[[sensors]]\nkind = "lidar"\n', "the first sensor is the \\[camera\\] table's"),
     ('[[sensors]]\nkind = "camera"\nyaw_deg = 90\n', "the first sensor is the \\[camera\\] table's"),
@@ -107,6 +126,7 @@ def test_a_scenario_declares_its_rig_and_rig_of_prefers_the_command_line():
     ('[[sensors]]\nkind = "camera"\nname = "a"\n[[sensors]]\nkind = "camera"\nname = "a"\n', "unique"),
     ('[[sensors]]\nkind = "camera"\n[[sensors]]\nkind = "lidar"\nelevation_max_deg = -20\n', "must exceed"),
     ('[[sensors]]\nkind = "camera"\n[[sensors]]\nkind = "lidar"\nwavelength = 905\n', "wavelength"),
+    ('[[sensors]]\nkind = "camera"\n[[sensors]]\nkind = "lidar"\nmount = "side"\n', "mount.*top, below"),
 ])
 def test_a_bad_rig_in_a_scenario_is_one_clear_error(bad, message):
     with pytest.raises(ScenarioError, match=message):
