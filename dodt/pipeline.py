@@ -138,7 +138,7 @@ class DODT:
         self.lidar_clouds: deque[LidarCloud] = deque()
         # the rig's other cameras' poses and clouds by frame seq, to vote with: {sensor: (poses, clouds, K)}
         self.other_views: dict[str, tuple[dict, dict, object]] = {}
-        self._lidar_view = (None, None, None, None)  # (static map, geofence, lowest, highest ray's elevation): set_scene
+        self._lidar_view = (None, None, None, None)  # static map, geofence, lowest and highest rays: set_scene
         self.last_stamp: float | None = None
         self.poses: dict[int, np.ndarray] = {}
         self.clouds: dict[int, np.ndarray] = {}  # seq -> that frame's filtered cloud

@@ -46,7 +46,8 @@ class SensorMount:
         if not (isinstance(self.yaw, (int, float)) and math.isfinite(self.yaw) and -360.0 <= self.yaw <= 360.0):
             raise ValueError(f"sensor {self.name!r}: yaw must be a finite angle in [-360, 360] deg, got {self.yaw!r}")
         if self.mount not in LIDAR_MOUNTS:
-            raise ValueError(f"sensor {self.name!r}: mount must be one of {', '.join(LIDAR_MOUNTS)}, got {self.mount!r}")
+            raise ValueError(f"sensor {self.name!r}: mount must be one of {', '.join(LIDAR_MOUNTS)}, "
+                             f"got {self.mount!r}")
 
     def lidar_model(self) -> LidarModel:
         if self.lidar is not None:

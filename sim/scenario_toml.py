@@ -269,8 +269,9 @@ def _array_of_tables(top: _Section, name: str, most: int) -> list[_Section]:
 def _read_sensors(top: _Section) -> tuple[SensorMount, ...]:
     """[[sensors]]: the drone's rig (sim.rig), each a camera like [camera] turned by ``yaw_deg`` on the body,
     or a LiDAR (its model's parameters; sim.lidar_model) on top of the body or, with ``mount = "below"``,
-    upside down under it (its elevations in the body's frame, by default -52 to +7 deg). The first is the [camera] itself: a camera
-    with ``yaw_deg`` 0. Empty when the file has none (then ``--rig``, front by default, decides)."""
+    upside down under it (its elevations in the body's frame, by default -52 to +7 deg). The first is the
+    [camera] itself: a camera with ``yaw_deg`` 0. Empty when the file has none (then ``--rig``, front by
+    default, decides)."""
     out = []
     for s in _array_of_tables(top, "sensors", MAX_SENSORS):
         kind = s.string("kind", choices=("camera", "lidar"))
