@@ -181,9 +181,8 @@ class LidarCloud(NamedTuple):
 def in_lidar_field(points: np.ndarray, scans, min_range: float, margin: float) -> np.ndarray:
     """(n,) bool: whether each point lay, by ``margin`` m, inside the field of at least one of ``scans``
     (LidarCloud): above the scan's lowest ray, below its highest and beyond ``min_range`` (the detector's
-    blind zone). A static
-    box the sensor passes close by is below its lowest ray (-7 deg: 0.2 m under the sensor at 1.6 m) until
-    the sensor is past it; its top face then comes into the field at once, points that were in no cloud
+    blind zone). A static box the sensor passes close by is below its lowest ray (-7 deg: 0.2 m under the
+    sensor at 1.6 m) until the sensor is past it; its top face then comes into the field at once, points that were in no cloud
     back then, and would vote moving. (The detector's horizontal range is left out: what it cuts comes in
     a strip at a time, beside what the cloud held, and the points of a walker coming into it vote moving
     against its own nearer side, as they should.)"""
@@ -193,12 +192,13 @@ def in_lidar_field(points: np.ndarray, scans, min_range: float, margin: float) -
         T = np.asarray(s.T_world_sensor, dtype=np.float64)
         d = P - T[:3, 3]
         ok = np.linalg.norm(d, axis=1) >= min_range + margin
-        if s.elevation_min is not None:
+        if s.elevation_min is not None or s.elevation_max is not None:
             q = d @ T[:3, :3]  # the sensor frame
-            ok &= q[:, 2] - np.hypot(q[:, 0], q[:, 1]) * np.tan(s.elevation_min) >= margin
-        if s.elevation_max is not None:  # a sensor under the body: what rises above its highest ray
-            q = d @ T[:3, :3]
-            ok &= np.hypot(q[:, 0], q[:, 1]) * np.tan(s.elevation_max) - q[:, 2] >= margin
+            h = np.hypot(q[:, 0], q[:, 1])
+            if s.elevation_min is not None:
+                ok &= q[:, 2] - h * np.tan(s.elevation_min) >= margin
+            if s.elevation_max is not None:  # a sensor under the body: what rises above its highest ray
+                ok &= h * np.tan(s.elevation_max) - q[:, 2] >= margin
         inside |= ok
     return inside
 

@@ -187,9 +187,9 @@ class DODT:
                   lidar_elevation_max: float | None = None) -> None:
         """What the LiDAR detector knows of the scene (dodt.lidar_detector): the static map
         (a dodt.context.StaticMapView), the geofence ((x, y) low, (x, y) high; its sides are walls),
-        the LiDAR's lowest and highest rays' elevations [rad]. The motion label checks its tracks against the static
-        map's long-held structure (``established_fraction``) and the geofence's walls (dodt.motion_label);
-        the tracker holds coasting tracks off those walls (track.wall_clearance)."""
+        the LiDAR's lowest and highest rays' elevations [rad]. The motion label checks its tracks against
+        the static map's long-held structure (``established_fraction``) and the geofence's walls
+        (dodt.motion_label); the tracker holds coasting tracks off those walls (track.wall_clearance)."""
         self._lidar_view = (static_map, geofence, lidar_elevation_min, lidar_elevation_max)
         self.motion.structure_test = getattr(static_map, "established_fraction", None)
         walls = None if geofence is None else (np.asarray(geofence[0], float), np.asarray(geofence[1], float))

@@ -27,6 +27,11 @@ from sim.lidar_model import LidarModel, below_mount, top_mount, upside_down
 LIDAR_MOUNTS = ("top", "below")
 
 
+def mounted_model(mount: str) -> LidarModel:
+    """The Mid-360-like defaults as mounted: on top, or upside down under the body (the field mirrored)."""
+    return LidarModel() if mount == "top" else upside_down(LidarModel())
+
+
 @dataclass(frozen=True)
 class SensorMount:
     """One sensor of a rig: ``kind`` "camera" or "lidar", its name, and its yaw on the body [deg]
@@ -50,9 +55,7 @@ class SensorMount:
                              f"got {self.mount!r}")
 
     def lidar_model(self) -> LidarModel:
-        if self.lidar is not None:
-            return self.lidar
-        return LidarModel() if self.mount == "top" else upside_down(LidarModel())
+        return mounted_model(self.mount) if self.lidar is None else self.lidar
 
     def T_body_lidar(self) -> np.ndarray:
         """The LiDAR's frame in the body frame: on top or under the body (``mount``), turned by ``yaw``."""

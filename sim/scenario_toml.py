@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from sim.lidar_model import LidarModel, upside_down
-from sim.rig import LIDAR_MOUNTS, SensorMount
+from sim.lidar_model import LidarModel
+from sim.rig import LIDAR_MOUNTS, SensorMount, mounted_model
 from sim.scenario_bounds import (MAX_ANGLE_DEG, MAX_COORDINATE, MAX_DURATION, MAX_FILE_BYTES, MAX_KEY_PARTS,
                                  MAX_MOUNT_OFFSET, MAX_NAME_CHARS, MAX_OBSTACLE_SIZE, MAX_OBSTACLES, MAX_PEOPLE,
                                  MAX_POINTS, MAX_SENSORS, SEED_MAX, ScenarioError, finite_number, short_repr)
@@ -284,7 +284,7 @@ def _read_sensors(top: _Section) -> tuple[SensorMount, ...]:
         lidar, mount = None, "top"
         if kind == "lidar":
             mount = s.string("mount", "top", choices=LIDAR_MOUNTS)
-            d = LidarModel() if mount == "top" else upside_down(LidarModel())
+            d = mounted_model(mount)
             el_min = s.number("elevation_min_deg", math.degrees(d.elevation_min), lo=-90.0, hi=90.0)
             el_max = s.number("elevation_max_deg", math.degrees(d.elevation_max), lo=-90.0, hi=90.0)
             if el_max <= el_min:

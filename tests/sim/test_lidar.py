@@ -13,6 +13,7 @@ from sim.controller import Reference
 from sim.lidar import (LidarModel, cast_rays, dropout_probability, ray_directions, scan_directions, simulate_scan,
                        top_mount)
 from sim.lidar_panorama import PanoramaCaster
+from sim.rig import rig
 
 with quiet_stdout():
     import pybullet as p
@@ -252,7 +253,6 @@ def test_flying_at_head_height_a_lidar_under_the_body_sees_the_person_beside_it_
     """The drone at 1.6 m, a 1.65 m person 0.8 m to its left: on top (1.72 m up, -7 deg at the lowest) the
     field passes over their head; upside down under the body (1.48 m up, -52 to +7 deg) it holds them from
     the floor up, and no ray meets the drone's own box."""
-    from sim.rig import rig
     sc = make_scenario(standing(1.65, (5.0, 0.8))).with_values({"drone.start": [5.0, 0.0, 1.6]})
     w = World(sc, seed=0, camera=False, render=False)
     person = next(o for o in w.obstacle_truth() if o.kind == "person")
