@@ -182,10 +182,10 @@ def in_lidar_field(points: np.ndarray, scans, min_range: float, margin: float) -
     """(n,) bool: whether each point lay, by ``margin`` m, inside the field of at least one of ``scans``
     (LidarCloud): above the scan's lowest ray, below its highest and beyond ``min_range`` (the detector's
     blind zone). A static box the sensor passes close by is below its lowest ray (-7 deg: 0.2 m under the
-    sensor at 1.6 m) until the sensor is past it; its top face then comes into the field at once, points that were in no cloud
-    back then, and would vote moving. (The detector's horizontal range is left out: what it cuts comes in
-    a strip at a time, beside what the cloud held, and the points of a walker coming into it vote moving
-    against its own nearer side, as they should.)"""
+    sensor at 1.6 m) until the sensor is past it; its top face then comes into the field at once, points
+    that were in no cloud back then, and would vote moving. (The detector's horizontal range is left out:
+    what it cuts comes in a strip at a time, beside what the cloud held, and the points of a walker coming
+    into it vote moving against its own nearer side, as they should.)"""
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     inside = np.zeros(len(P), bool)
     for s in scans:
